@@ -1,0 +1,77 @@
+#!/usr/bin/env bash
+# Idempotent set-up: system packages (Mesa 25 lavapipe, ffmpeg), a Python 3.12 venv in .venv with the
+# pinned packages, and a check that SAPIEN renders one frame. Re-running after success takes seconds.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+STAMP="$VENV/.wsp-setup-stamp"
+KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" | sha256sum | cut -c1-16)"
+log() { printf '[wsp setup] %s\n' "$*" >&2; }
+die() { printf '[wsp setup] error: %s\n' "$*" >&2; exit 1; }
+
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else die "need root for: $*"; fi; }
+
+mesa_ok() {
+  local v; v="$(dpkg-query -W -f='${Version}' mesa-vulkan-drivers 2>/dev/null || true)"
+  [ -n "$v" ] && dpkg --compare-versions "$v" ge 25 && [ -f /usr/share/vulkan/icd.d/lvp_icd.json ]
+}
+
+system_packages() {
+  if mesa_ok && command -v ffmpeg >/dev/null; then return; fi
+  command -v apt-get >/dev/null || die "apt-get not found: this set-up supports Debian bookworm machines"
+  local codename; codename="$(. /etc/os-release; echo "${VERSION_CODENAME:-}")"
+  [ "$codename" = bookworm ] || die "expected Debian bookworm, found '${codename:-unknown}'"
+  local src=/etc/apt/sources.list.d/wsp-bookworm-backports.sources
+  if [ ! -f "$src" ]; then
+    # Derive the backports entry from the machine's existing bookworm entry (same mirror, same key).
+    local uri="" key=""
+    if [ -f /etc/apt/sources.list.d/debian.sources ]; then
+      read -r uri key < <(awk 'BEGIN{RS="";FS="\n"} /Suites:[^\n]*bookworm( |$|\n)/ && !/bookworm-security/ {
+          u="";k=""; for(i=1;i<=NF;i++){ if($i ~ /^URIs:/){split($i,a," "); u=a[2]} if($i ~ /^Signed-By:/){split($i,b," "); k=b[2]} }
+          print u, k; exit }' /etc/apt/sources.list.d/debian.sources)
+    fi
+    if [ -z "$uri" ] && [ -f /etc/apt/sources.list ]; then
+      uri="$(awk '$1=="deb" && $3=="bookworm" {print $2; exit}' /etc/apt/sources.list)"
+    fi
+    [ -n "$uri" ] || die "no Debian bookworm source entry found to derive bookworm-backports from"
+    [ -n "$key" ] || key=/usr/share/keyrings/debian-archive-keyring.gpg
+    log "adding bookworm-backports from $uri"
+    printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: %s\n' "$uri" "$key" | as_root tee "$src" >/dev/null
+  fi
+  log "installing mesa-vulkan-drivers (Mesa 25, bookworm-backports) and ffmpeg"
+  as_root apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libosmesa6 >/dev/null
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq ffmpeg >/dev/null
+  mesa_ok || die "mesa-vulkan-drivers >= 25 with lvp_icd.json is still missing after install"
+}
+
+find_python() {
+  local c
+  for c in "${WSP_PYTHON:-}" "$(command -v python3.12 || true)" "$HOME"/.pyenv/versions/3.12*/bin/python3.12 \
+           "${PYENV_ROOT:-/nonexistent}"/versions/3.12*/bin/python3.12; do
+    [ -n "$c" ] && [ -x "$c" ] && "$c" -c 'import sys; assert sys.version_info[:2]==(3,12)' 2>/dev/null && { echo "$c"; return; }
+  done
+  die "no Python 3.12 found (tried \$WSP_PYTHON, python3.12 on PATH, ~/.pyenv/versions/3.12*). Install Python 3.12 (e.g. 'pyenv install 3.12.1') and re-run."
+}
+
+python_env() {
+  if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$KEY" ]; then return; fi
+  local py; py="$(find_python)"
+  [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; "$py" -m venv "$VENV"; }
+  log "installing pinned packages (first run downloads torch, a few minutes)"
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  "$VENV/bin/python" -m pip install -q -e "$ROOT"
+  local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"
+  if [ "$n" != 1 ]; then
+    log "more than one OpenCV distribution present; keeping only opencv-python-headless"
+    "$VENV/bin/python" -m pip uninstall -q -y opencv-python opencv-contrib-python opencv-contrib-python-headless || true
+    "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps "$("$VENV/bin/python" -m pip list --format=freeze | grep -i '^opencv-python-headless==')"
+  fi
+}
+
+system_packages
+python_env
+log "checking that SAPIEN renders one frame"
+"$VENV/bin/python" -m wsp_data.platforms.render_check || die "SAPIEN could not render a frame (see above)"
+echo "$KEY" > "$STAMP"
+log "ready: $VENV"

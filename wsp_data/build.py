@@ -1,0 +1,232 @@
+"""Run a build: decide this shard's slots (resumably, optionally in worker processes), then — once every
+slot of the config is decided — assemble the config, its build report and the release-level files.
+
+Layout while building: `<release>/.wsp-staging/<config>/` holds `build_config.json` and one folder per
+decided slot (see `staging`). It is removed when the config is assembled.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import os
+import shutil
+import sys
+import tempfile
+import time
+from collections import Counter, defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from wsp_data.builders import BUILDERS, BuildConfig, Kept, builder_class
+from wsp_data.release import ReleaseError, load_release, record_build, write_release
+from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, RELEASE_JSON, STAGING_DIR, scene_seed
+from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
+from wsp_data.writer import write_config
+
+
+class BuildError(RuntimeError):
+    """A build that cannot start or continue; the message names the path and the problem."""
+
+
+@dataclass
+class BuildResult:
+    config: BuildConfig
+    release: Path
+    decided_now: int
+    kept_now: int
+    remaining: int  # slots of the config not decided yet (other shards)
+    assembled: bool
+    seconds: float
+    rendered_steps: int
+    report: dict | None = None
+
+
+# -- output folder checks ------------------------------------------------------------------------------
+def prepare_output(out: Path) -> Path:
+    """Create / check the release folder: writable, and either empty or a WorldSimProbe release."""
+    out = Path(out).expanduser().resolve()
+    if out.exists() and not out.is_dir():
+        raise BuildError(f"{out}: exists and is not a folder")
+    if out.exists() and any(out.iterdir()) and not (out / RELEASE_JSON).exists() and not (out / STAGING_DIR).exists():
+        raise BuildError(f"{out}: folder is not empty and is not a WorldSimProbe release; choose an empty or new folder")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".wsp-write-test"):
+            pass
+    except OSError as e:
+        raise BuildError(f"{out}: cannot write here ({e.strerror or e})") from e
+    if (out / RELEASE_JSON).exists():
+        try:
+            load_release(out)
+        except ReleaseError as e:
+            raise BuildError(str(e)) from e
+    return out
+
+
+def _open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
+    staging = Staging(out / STAGING_DIR / config.name)
+    cfg_path = staging.root / CONFIG_JSON
+    if restart:
+        shutil.rmtree(staging.root, ignore_errors=True)
+    if cfg_path.exists():
+        previous = json.loads(cfg_path.read_text())
+        if previous != config.to_json():
+            raise BuildError(
+                f"{staging.root}: an unfinished build of {config.name} with a different configuration is staged "
+                f"({json.dumps(previous, sort_keys=True)}). Re-run with those arguments to resume it, or pass "
+                f"--restart to discard it.")
+    else:
+        staging.root.mkdir(parents=True, exist_ok=True)
+        cfg_path.write_text(json.dumps(config.to_json(), indent=1, sort_keys=True))
+    staging.clean_partial()
+    return staging
+
+
+# -- slot decisions -------------------------------------------------------------------------------------
+def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
+    """Try attempts for one slot until one is kept; stage the decision atomically."""
+    cfg: BuildConfig = builder.config
+    task = cfg.task_of(slot)
+    record = SlotRecord(slot)
+    rollouts: list[RolloutArrays] = []
+    for a in range(cfg.max_attempts):
+        seed = scene_seed(cfg.suite, slot, a)
+        try:
+            out = builder.attempt(task, seed, cfg.rng(slot, a))
+        except Exception as e:  # noqa: BLE001 - a simulator crash drops the proposal and is reported
+            print(f"[wsp build] slot {slot} attempt {a} ({task}, seed {seed}): {type(e).__name__}: {e}",
+                  file=sys.stderr)
+            out = None
+        entry = {"attempt": a, "seed": seed, "task": task,
+                 "outcome": "kept" if isinstance(out, Kept) else ("simulator_error" if out is None else out.reason),
+                 "rendered_steps": 0 if out is None else out.rendered_steps}
+        record.attempts.append(entry)
+        if isinstance(out, Kept):
+            record.row = {**out.row, "suite": cfg.suite, "platform": cfg.platform, "slot": slot, "attempt": a,
+                          "instance_id": INSTANCE_ID.format(config=cfg.name, slot=slot)}
+            record.roles = [r.role for r in out.rollouts]
+            rollouts = out.rollouts
+            break
+    staging.write_slot(record, rollouts)
+    return record
+
+
+_WORKER: dict = {}
+
+
+def _worker_init(config_json: dict, staging_root: str) -> None:
+    cfg = BuildConfig.from_json(config_json)
+    _WORKER["builder"] = builder_class(cfg.suite)(cfg)
+    _WORKER["staging"] = Staging(Path(staging_root))
+
+
+def _worker_decide(slot: int) -> SlotRecord:
+    return decide_slot(_WORKER["builder"], _WORKER["staging"], slot)
+
+
+def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, progress: bool
+               ) -> Iterator[SlotRecord]:
+    if workers <= 1 or len(slots) <= 1:
+        builder = builder_class(config.suite)(config)
+        try:
+            for slot in slots:
+                yield decide_slot(builder, staging, slot)
+        finally:
+            builder.close()
+        return
+    ctx = mp.get_context("spawn")
+    with ctx.Pool(workers, initializer=_worker_init, initargs=(config.to_json(), str(staging.root))) as pool:
+        yield from pool.imap_unordered(_worker_decide, slots)
+
+
+# -- report ---------------------------------------------------------------------------------------------
+def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
+    """Proposed / kept / dropped per task and per reason (deterministic: no timings)."""
+    per_task: dict[str, dict] = defaultdict(lambda: {"proposed": 0, "kept": 0, "dropped": Counter()})
+    dropped: Counter = Counter()
+    rendered = rendered_kept = 0
+    for r in records:
+        for a in r.attempts:
+            t = per_task[a["task"]]
+            t["proposed"] += 1
+            rendered += a["rendered_steps"]
+            if a["outcome"] == "kept":
+                t["kept"] += 1
+                rendered_kept += a["rendered_steps"]
+            else:
+                t["dropped"][a["outcome"]] += 1
+                dropped[a["outcome"]] += 1
+    kept = sum(r.kept for r in records)
+    return {
+        "config": config.name, "build_config": config.to_json(), "requested": config.count, "kept": kept,
+        "exhausted_slots": [r.slot for r in records if not r.kept],
+        "proposed": sum(len(r.attempts) for r in records), "dropped": dict(sorted(dropped.items())),
+        "per_task": {k: {**v, "dropped": dict(sorted(v["dropped"].items()))} for k, v in sorted(per_task.items())},
+        "rendered_steps": rendered, "rendered_steps_in_kept": rendered_kept,
+    }
+
+
+def format_report(report: dict) -> str:
+    lines = [f"{report['config']}: kept {report['kept']} / {report['requested']} requested, "
+             f"{report['proposed']} proposals", f"{'task':<18} {'proposed':>8} {'kept':>5}  dropped by reason"]
+    for task, t in report["per_task"].items():
+        reasons = ", ".join(f"{k}={v}" for k, v in t["dropped"].items()) or "-"
+        lines.append(f"{task:<18} {t['proposed']:>8} {t['kept']:>5}  {reasons}")
+    if report["exhausted_slots"]:
+        lines.append(f"{len(report['exhausted_slots'])} slot(s) found no valid instance in "
+                     f"{report['build_config']['max_attempts']} attempts: {report['exhausted_slots'][:10]}")
+    return "\n".join(lines)
+
+
+# -- assembly -------------------------------------------------------------------------------------------
+def assemble(config: BuildConfig, out: Path, staging: Staging) -> dict:
+    records = [staging.read_slot(k) for k in range(config.count)]
+    if not any(r.kept for r in records):
+        raise BuildError(f"{config.name}: no proposal passed validation; see the drop reasons in "
+                         f"{staging.root} (nothing was assembled)")
+    kept = ((r, staging.read_rollouts(r.slot, r.roles)) for r in records if r.kept)
+    write_config(out / config.name, config.name, config.platform, kept)
+    report = build_report(config, records)
+    (out / config.name / BUILD_REPORT).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
+    record_build(out, config.name, config.to_json())
+    write_release(out, BUILDERS)
+    shutil.rmtree(staging.root)
+    if not any((out / STAGING_DIR).iterdir()):
+        (out / STAGING_DIR).rmdir()
+    return report
+
+
+def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), workers: int = 1,
+          restart: bool = False, progress: bool = True) -> BuildResult:
+    index, total = shard
+    if not (total >= 1 and 0 <= index < total):
+        raise BuildError(f"--shard {index}/{total}: expected i/n with 0 <= i < n")
+    out = prepare_output(out)
+    if (out / RELEASE_JSON).exists() and not (out / STAGING_DIR / config.name).exists() and not restart:
+        existing = load_release(out)["configs"].get(config.name)
+        if existing and existing["build_config"] == config.to_json() and (out / config.name).exists():
+            return BuildResult(config, out, 0, 0, 0, False, 0.0, 0)
+    staging = _open_staging(out, config, restart)
+    t0 = time.perf_counter()
+    todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
+    decided = kept = steps = 0
+    bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="inst", disable=not progress, file=sys.stderr)
+    for record in _run_slots(config, staging, todo, workers, progress):
+        decided += 1
+        kept += record.kept
+        steps += sum(a["rendered_steps"] for a in record.attempts)
+        bar.update(1)
+        bar.set_postfix(kept=kept, dropped=decided - kept)
+    bar.close()
+    remaining = sum(not staging.is_decided(k) for k in range(config.count))
+    report = assemble(config, out, staging) if remaining == 0 else None
+    return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
+                       steps, report)
+
+
+def default_workers() -> int:
+    return max(1, min(2, os.cpu_count() or 1))

@@ -1,0 +1,17 @@
+"""Suite builders, found by name. One module per suite; this is the one place that registers them."""
+
+from __future__ import annotations
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SuiteBuilder
+from wsp_data.builders.t1 import T1Builder
+
+BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder,)}
+
+
+def builder_class(suite: str) -> type[SuiteBuilder]:
+    if suite not in BUILDERS:
+        raise KeyError(f"suite {suite!r} has no builder yet; available: {', '.join(sorted(BUILDERS))}")
+    return BUILDERS[suite]
+
+
+__all__ = ["BUILDERS", "BuildConfig", "Dropped", "Kept", "SuiteBuilder", "builder_class"]

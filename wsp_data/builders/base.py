@@ -1,0 +1,110 @@
+"""What every suite builder shares: the build config, the attempt outcome types, and the `SuiteBuilder`
+base class whose hooks a suite module fills in.
+
+A build has `count` slots. Slot k is balanced onto task `tasks[k % len(tasks)]` and tries attempts
+a = 0, 1, … (scene seed `scene_seed(suite, k, a)`, proposal RNG seeded by (build seed, k, a)) until one
+is kept or `max_attempts` are spent. A slot's outcome depends only on (config, k): shards, workers and
+resumed runs therefore produce the same instances.
+"""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from dataclasses import asdict, dataclass, field
+from typing import ClassVar
+
+import numpy as np
+
+from wsp_data.schema import MAX_ATTEMPTS, PLATFORMS, SUITES
+from wsp_data.staging import RolloutArrays
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Everything that determines a config's content. Two builds with equal configs are byte-identical."""
+
+    suite: str
+    platform: str
+    count: int
+    tasks: tuple[str, ...]
+    seed: int = 0
+    max_attempts: int = 8
+
+    def __post_init__(self):
+        if self.suite not in SUITES:
+            raise ValueError(f"unknown suite {self.suite!r}; known: {', '.join(SUITES)}")
+        if self.platform not in PLATFORMS:
+            raise ValueError(f"unknown platform {self.platform!r}; known: {', '.join(PLATFORMS)}")
+        if self.count <= 0:
+            raise ValueError(f"--count must be a positive number of instances, got {self.count}")
+        if not self.tasks:
+            raise ValueError("no tasks selected")
+        if not 1 <= self.max_attempts <= MAX_ATTEMPTS:
+            raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
+
+    @property
+    def name(self) -> str:
+        return f"{self.suite}_{self.platform}"
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["tasks"] = list(self.tasks)
+        return d
+
+    @classmethod
+    def from_json(cls, d: dict) -> BuildConfig:
+        return cls(**{**d, "tasks": tuple(d["tasks"])})
+
+    def task_of(self, slot: int) -> str:
+        return self.tasks[slot % len(self.tasks)]
+
+    def rng(self, slot: int, attempt: int) -> np.random.Generator:
+        return np.random.default_rng([self.seed, slot, attempt])
+
+    def dumps(self) -> str:
+        return json.dumps(self.to_json(), sort_keys=True)
+
+
+@dataclass
+class Kept:
+    """An accepted proposal: the instance row (suite-specific fields) and its rollouts in role order."""
+
+    row: dict
+    rollouts: list[RolloutArrays]
+    rendered_steps: int = 0
+
+
+@dataclass
+class Dropped:
+    """A rejected proposal and why (a key of the build report)."""
+
+    reason: str
+    rendered_steps: int = 0
+    detail: dict = field(default_factory=dict)
+
+
+class SuiteBuilder(ABC):
+    """One suite on one platform.
+
+    Roles:
+        `roles`: the rollouts of one instance, in order (e.g. original, small, large).
+    Hooks:
+        `attempt(task, seed, rng)`: propose, execute (unrendered first), validate, render what passed.
+        `close()`: release simulator resources.
+    """
+
+    suite: ClassVar[str]
+    title: ClassVar[str]
+    description: ClassVar[str]
+    roles: ClassVar[tuple[str, ...]]
+
+    def __init__(self, config: BuildConfig):
+        self.config = config
+
+    @abstractmethod
+    def attempt(self, task: str, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        """Try one proposal for `task` at scene seed `seed`."""
+
+    def close(self) -> None:
+        """Release simulator resources."""

@@ -1,0 +1,120 @@
+"""T1 Local action calibration (SPEC §3 T1).
+
+Proposal: a verified expert source trajectory; one non-gripper action dimension, one direction, one
+window of `WINDOW` steps, two distinct magnitudes from `MAGNITUDES` (native units: rad), the smaller one
+"small". The triplet shares the scene seed, dimension, direction and window.
+Validation: both variants replayed unrendered first (task success + common validity, SPEC §5); only then
+all three are rendered, and the triplet is kept when all three rendered references succeed and
+0 < D(x⁰, xˢ) < D(x⁰, xˡ), D being the temporally aligned full-video MSE on the simulator's own frames.
+Stored per instance: D⁰ˢ, D⁰ˡ, r* = D⁰ˢ / D⁰ˡ and every perturbation parameter.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SuiteBuilder
+from wsp_data.builders.validity import check_rollout
+from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
+from wsp_data.schema import FPS
+from wsp_data.sources.experts import ExpertSource, task_spec
+from wsp_data.staging import RolloutArrays
+from wsp_eval.video import aligned_mse
+
+MAGNITUDES = (0.0025, 0.005, 0.010, 0.015, 0.020)
+WINDOW = 20  # steps (1 s at 20 Hz)
+PERTURBED_DIMS = 7  # the 7 arm joints; the gripper (dim 7) is never perturbed
+
+
+class _TaskRig:
+    """The simulator resources of one task in one worker: expert source, unrendered and rendered replays."""
+
+    def __init__(self, task: str):
+        spec = task_spec(task)
+        self.spec = spec
+        self.expert = ExpertSource(task)
+        self.state = self.expert.replayer
+        self.render = ManiSkillPlatform(task, render=True, objects=spec.objects)
+        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+
+    def close(self) -> None:
+        self.expert.close()
+        self.render.close()
+
+    def invalid(self, ro: Rollout) -> str | None:
+        return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
+                             self.qlimits)
+
+
+class T1Builder(SuiteBuilder):
+    suite = "t1"
+    title = "T1 Local action calibration"
+    description = ("Triplets (original, small, large): one non-gripper joint target perturbed in one direction over "
+                   "one 1 s window at two magnitudes from {0.0025, 0.005, 0.010, 0.015, 0.020} rad. All three "
+                   "references succeed and 0 < D0s < D0l on the simulator's own frames; columns `d_os`, `d_ol` "
+                   "and `r_star` hold the reference-side MSEs and ratio. Score: response-ratio calibration.")
+    roles = ("original", "small", "large")
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        self._rigs: dict[str, _TaskRig] = {}
+
+    def rig(self, task: str) -> _TaskRig:
+        if task not in self._rigs:
+            self._rigs[task] = _TaskRig(task)
+        return self._rigs[task]
+
+    def close(self) -> None:
+        for r in self._rigs.values():
+            r.close()
+        self._rigs.clear()
+
+    @staticmethod
+    def perturb(actions: np.ndarray, dim: int, direction: int, start: int, magnitude: float) -> np.ndarray:
+        out = actions.copy()
+        out[start:start + WINDOW, dim] += direction * magnitude
+        return out
+
+    def attempt(self, task: str, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        rig = self.rig(task)
+        source = rig.expert.trajectory(seed)
+        if source is None:
+            return Dropped("source_failed")
+        if len(source) < WINDOW + 2:
+            return Dropped("source_too_short")
+        dim = int(rng.integers(PERTURBED_DIMS))
+        direction = int(rng.choice([-1, 1]))
+        start = int(rng.integers(0, len(source) - WINDOW + 1))
+        small, large = sorted(float(m) for m in rng.choice(MAGNITUDES, size=2, replace=False))
+        streams = {"original": source, "small": self.perturb(source, dim, direction, start, small),
+                   "large": self.perturb(source, dim, direction, start, large)}
+        for role in ("small", "large"):  # unrendered validation first: rejected proposals cost no rendering
+            ro = rig.state.replay(seed, streams[role])
+            if (why := rig.invalid(ro)) is not None:
+                return Dropped(why)
+            if not ro.success:
+                return Dropped("variant_failed")
+        rendered = {role: rig.render.replay(seed, s) for role, s in streams.items()}
+        steps = sum(len(s) for s in streams.values())
+        for role, ro in rendered.items():
+            if not ro.success:
+                return Dropped("rendered_reference_failed", steps, {"role": role})
+            if (why := rig.invalid(ro)) is not None:
+                return Dropped(why, steps)
+        rgb = {role: ro.stack("rgb") for role, ro in rendered.items()}
+        d_os = aligned_mse(rgb["original"], rgb["small"], FPS, FPS)
+        d_ol = aligned_mse(rgb["original"], rgb["large"], FPS, FPS)
+        if d_os <= 0:
+            return Dropped("zero_response", steps)
+        if not d_os < d_ol:
+            return Dropped("not_monotone", steps)
+        window = {"dim": dim, "direction": direction, "start": start, "end": start + WINDOW}
+        row = {
+            "task": task, "seed": seed, "instruction": rig.spec.instruction, "objects": list(rig.spec.objects),
+            "source": "scripted_expert", "perturb_dim": dim, "perturb_direction": direction,
+            "window_start": start, "window_end": start + WINDOW, "magnitude_small": small, "magnitude_large": large,
+            "d_os": d_os, "d_ol": d_ol, "r_star": d_os / d_ol,
+            "interventions": {"original": {}, "small": {**window, "magnitude": small},
+                              "large": {**window, "magnitude": large}},
+        }
+        return Kept(row, [RolloutArrays.from_rollout(role, rendered[role]) for role in self.roles], steps)

@@ -1,0 +1,1 @@
+"""Simulator platforms. Simulators are imported only inside this package."""

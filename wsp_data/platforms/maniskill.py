@@ -1,0 +1,213 @@
+"""ManiSkill3 (SAPIEN, CPU physics) platform: replays 8-D `pd_joint_pos` streams and records everything a
+rollout stores — the 128×128 `base_camera` RGB, an exact robot label mask from SAPIEN segmentation, robot
+qpos, TCP pose, task object poses, robot–object contact flags, camera parameters and task success.
+
+One `ManiSkillPlatform` holds one long-lived env (the first rendering env in a process costs seconds;
+`reset(seed=…)` costs ~0.2 s). `render=False` gives a state-only env (~40× cheaper per step) for
+validating proposals before anything is rendered.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wsp_data.platforms.runtime import configure_cpu_rendering
+from wsp_data.schema import ACTION_DIM, IMAGE_SIZE, MAX_OBJECTS
+
+configure_cpu_rendering()
+
+import gymnasium as gym  # noqa: E402
+import mani_skill.envs  # noqa: E402,F401  (registers the tasks)
+import torch  # noqa: E402
+from mani_skill.utils.geometry import rotation_conversions  # noqa: E402
+from mani_skill.utils.structs import Actor, Link  # noqa: E402
+
+logging.getLogger("mani_skill").setLevel(logging.ERROR)
+
+CAMERA = "base_camera"
+MASK_ARM, MASK_DISTAL = 1, 2
+# Links labelled 2 ("wrist, hand and fingers": the T4 motion gate seeds on these); every other robot link is 1.
+DISTAL_LINKS = frozenset({
+    "panda_link7", "panda_link8", "panda_hand", "panda_hand_tcp", "panda_leftfinger", "panda_rightfinger",
+    "panda_leftfinger_pad", "panda_rightfinger_pad", "camera_link", "camera_mount",
+})
+GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
+
+
+class PlatformError(RuntimeError):
+    """A task or stream the platform cannot run."""
+
+
+@dataclass
+class Observation:
+    """What the platform records after a reset or a step."""
+
+    qpos: np.ndarray  # (9,) float32: 7 arm joints + 2 finger joints
+    tcp_pose: np.ndarray  # (7,) float32: world position + quaternion (wxyz)
+    object_poses: np.ndarray  # (MAX_OBJECTS, 7) float32, NaN where the task has fewer objects
+    contacts: np.ndarray  # (MAX_OBJECTS,) bool: any robot link touches the object
+    success: bool
+    rgb: np.ndarray | None = None  # (128, 128, 3) uint8
+    mask: np.ndarray | None = None  # (128, 128) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
+
+
+@dataclass
+class Rollout:
+    """A replayed stream: T actions and the T+1 observations around them (frame 0 = after reset)."""
+
+    task: str
+    seed: int
+    actions: np.ndarray  # (T, 8) float32 joint-space stream as executed
+    ee_actions: np.ndarray  # (T, 7) float32 end-effector stream (FK of the joint targets)
+    observations: list[Observation] = field(default_factory=list)
+    intrinsic: np.ndarray | None = None  # (3, 3) OpenCV intrinsics
+    extrinsic: np.ndarray | None = None  # (3, 4) OpenCV world→camera
+
+    @property
+    def success(self) -> bool:
+        return bool(self.observations[-1].success)
+
+    def stack(self, name: str) -> np.ndarray:
+        return np.stack([getattr(o, name) for o in self.observations])
+
+
+def _np(x) -> np.ndarray:
+    return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+
+class ManiSkillPlatform:
+    """One ManiSkill env for one task, kept alive across many rollouts."""
+
+    def __init__(self, task: str, *, render: bool = True, control_mode: str = "pd_joint_pos",
+                 objects: tuple[str, ...] = ()):
+        self.task, self.render, self.control_mode = task, render, control_mode
+        env_id = task if task.endswith("-v1") else f"{task}-v1"
+        if env_id not in gym.registry:
+            raise PlatformError(f"unknown ManiSkill task {task!r}")
+        with contextlib.redirect_stdout(io.StringIO()):
+            self.env = gym.make(
+                env_id, obs_mode="rgb+segmentation" if render else "state_dict", sim_backend="physx_cpu",
+                render_backend="cpu", control_mode=control_mode, num_envs=1, max_episode_steps=100_000,
+                sensor_configs=dict(width=IMAGE_SIZE, height=IMAGE_SIZE),
+            )
+        self.u = self.env.unwrapped
+        # Render only the evaluated camera: a task's hand camera would double the cost of every step.
+        for name in list(self.u._sensors):
+            if name != CAMERA:
+                del self.u._sensors[name]
+        self.object_names = objects
+        self._lut: np.ndarray | None = None
+        self._pin = None
+
+    # -- lifecycle ------------------------------------------------------------------------------
+    def close(self) -> None:
+        self.env.close()
+
+    def __enter__(self) -> ManiSkillPlatform:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- scene facts ------------------------------------------------------------------------------
+    @property
+    def robot(self):
+        return self.u.agent.robot
+
+    def actor(self, name: str) -> Actor:
+        a = getattr(self.u, name, None)
+        if not isinstance(a, Actor):
+            raise PlatformError(f"{self.task} has no actor {name!r}")
+        return a
+
+    def _label_lut(self) -> np.ndarray:
+        """Segmentation id → mask label (0 / 1 / 2), built once from the env's id map."""
+        lut = np.zeros(max(self.u.segmentation_id_map) + 1, dtype=np.uint8)
+        robot = self.robot
+        for sid, obj in self.u.segmentation_id_map.items():
+            if isinstance(obj, Link) and obj.articulation is robot:
+                lut[sid] = MASK_DISTAL if obj.name in DISTAL_LINKS else MASK_ARM
+        return lut
+
+    # -- stepping ---------------------------------------------------------------------------------
+    def reset(self, seed: int) -> Observation:
+        obs, _ = self.env.reset(seed=int(seed))
+        return self._observe(obs)
+
+    def step(self, action: np.ndarray) -> Observation:
+        obs, _, _, _, _ = self.env.step(torch.as_tensor(np.asarray(action, dtype=np.float32))[None])
+        return self._observe(obs)
+
+    def _observe(self, obs) -> Observation:
+        u = self.u
+        poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
+        contacts = np.zeros(MAX_OBJECTS, dtype=bool)
+        for i, name in enumerate(self.object_names):
+            a = self.actor(name)
+            poses[i] = _np(a.pose.raw_pose[0])
+            contacts[i] = self.robot_touches(a)
+        ob = Observation(
+            qpos=_np(self.robot.get_qpos()[0]).astype(np.float32),
+            tcp_pose=_np(u.agent.tcp.pose.raw_pose[0]).astype(np.float32),
+            object_poses=poses, contacts=contacts, success=bool(_np(u.evaluate()["success"]).reshape(-1)[0]),
+        )
+        if self.render:
+            cam = obs["sensor_data"][CAMERA]
+            ob.rgb = _np(cam["rgb"][0]).astype(np.uint8)
+            seg = _np(cam["segmentation"][0, ..., 0]).astype(np.int64)
+            if self._lut is None:
+                self._lut = self._label_lut()
+            ob.mask = self._lut[np.clip(seg, 0, len(self._lut) - 1)]
+        return ob
+
+    def robot_touches(self, actor: Actor) -> bool:
+        """True when any robot link has a nonzero contact impulse with the actor this step."""
+        scene = self.u.scene
+        for link in self.robot.get_links():
+            if float(torch.linalg.norm(scene.get_pairwise_contact_impulses(link, actor))) > 0:
+                return True
+        return False
+
+    def camera_params(self) -> tuple[np.ndarray, np.ndarray]:
+        cam = self.u.scene.sensors[CAMERA]
+        p = cam.get_params()
+        return _np(p["intrinsic_cv"][0]).astype(np.float32), _np(p["extrinsic_cv"][0]).astype(np.float32)
+
+    # -- kinematics -------------------------------------------------------------------------------
+    def ee_action(self, joint_action: np.ndarray) -> np.ndarray:
+        """The end-effector form of a joint action: TCP target in the robot base frame (xyz + XYZ Euler)
+        by forward kinematics of the 7 joint targets, plus the unchanged gripper command."""
+        if self._pin is None:
+            art = self.robot._objs[0]
+            self._pin = art.create_pinocchio_model()
+            self._tcp_index = self.u.agent.tcp._objs[0].get_index()
+        q = np.zeros(self.robot.get_qpos().shape[1])
+        q[:7] = joint_action[:7]
+        self._pin.compute_forward_kinematics(q)
+        pose = self._pin.get_link_pose(self._tcp_index)  # relative to the articulation root (robot base)
+        rot = rotation_conversions.quaternion_to_matrix(torch.as_tensor(pose.q, dtype=torch.float64))
+        euler = _np(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))  # pd_ee_pose's convention
+        return np.array([*pose.p, *euler, joint_action[7]], dtype=np.float32)
+
+    # -- replay -----------------------------------------------------------------------------------
+    def replay(self, seed: int, actions: np.ndarray) -> Rollout:
+        """Reset to `seed` and execute a (T, 8) `pd_joint_pos` stream, recording every frame."""
+        actions = np.asarray(actions, dtype=np.float32)
+        if actions.ndim != 2 or actions.shape[1] != ACTION_DIM or len(actions) == 0:
+            raise PlatformError(f"expected a (T, {ACTION_DIM}) action stream, got shape {actions.shape}")
+        if not np.isfinite(actions).all():
+            raise PlatformError("action stream contains NaN or infinite values")
+        if self.control_mode != "pd_joint_pos":
+            raise PlatformError("replay needs a pd_joint_pos platform")
+        ro = Rollout(self.task, int(seed), actions, np.stack([self.ee_action(a) for a in actions]))
+        ro.observations.append(self.reset(seed))
+        if self.render:
+            ro.intrinsic, ro.extrinsic = self.camera_params()
+        for a in actions:
+            ro.observations.append(self.step(a))
+        return ro

@@ -1,0 +1,263 @@
+"""Expert source trajectories: one scripted solver per ManiSkill task, built from `skills`.
+
+`TASKS` is the registry of the benchmark's ManiSkill tasks (name → `TaskSpec`). `ExpertSource` scripts a
+task at a seed, replays the recorded joint stream under `pd_joint_pos` and keeps it only if the replay
+succeeds, so every source trajectory it returns is a verified `pd_joint_pos` success.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import sapien
+from mani_skill.examples.motionplanning.base_motionplanner.utils import compute_grasp_info_by_obb, get_actor_obb
+
+from wsp_data.platforms.maniskill import ManiSkillPlatform
+from wsp_data.sources.skills import SkillScript, verify
+
+FINGER_LENGTH = 0.025
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """A ManiSkill task of the benchmark: its objects (pose/contact columns, in order) and its solver."""
+
+    name: str
+    objects: tuple[str, ...]
+    instruction: str
+    solve: Callable[[SkillScript], None]
+
+    @property
+    def target(self) -> str:
+        """The dominant object the task manipulates (first listed)."""
+        return self.objects[0]
+
+
+def top_grasp(s: SkillScript, actor: str, yaw: float = 0.0, offset=(0.0, 0.0, 0.0), closing=None) -> sapien.Pose:
+    """Top-down grasp on an actor's oriented bounding box (ManiSkill's own grasp construction). `closing`
+    picks, among equally wide faces, the finger-closing axis nearest to that direction."""
+    obb = get_actor_obb(s.platform.actor(actor))
+    hint = s.u.agent.tcp.pose.to_transformation_matrix()[0, :3, 1].cpu().numpy()
+    if closing is not None:  # the sign nearest to the wrist's current one keeps joint 7 from winding up
+        closing = np.asarray(closing, dtype=np.float64)
+        hint = closing if closing @ hint >= 0 else -closing
+    info = compute_grasp_info_by_obb(obb, approaching=np.array([0, 0, -1]), target_closing=hint,
+                                     depth=FINGER_LENGTH)
+    pose = s.u.agent.build_grasp_pose(np.array([0, 0, -1]), info["closing"], info["center"])
+    return pose * sapien.Pose(offset, _yaw_q(yaw))
+
+
+def _yaw_q(yaw: float) -> np.ndarray:
+    return np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+
+
+def _xyz(p) -> np.ndarray:
+    return np.asarray(p, dtype=np.float64).reshape(-1)[:3]
+
+
+def _axis(pose: sapien.Pose, i: int) -> np.ndarray:
+    """The world direction of a pose's local axis i (0 x, 1 y, 2 z)."""
+    return pose.to_transformation_matrix()[:3, i]
+
+
+def _yaw(pose: sapien.Pose) -> float:
+    x = _axis(pose, 0)
+    return float(np.arctan2(x[1], x[0]))
+
+
+def _wrap(angle: float, period: float = 2 * np.pi) -> float:
+    return float((angle + period / 2) % period - period / 2)
+
+
+def rotated(pose: sapien.Pose, axis, angle: float) -> sapien.Pose:
+    """`pose` turned by `angle` about a world axis through its own origin (the TCP stays put)."""
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    r = sapien.Pose(q=[np.cos(angle / 2), *(np.sin(angle / 2) * axis)])
+    return sapien.Pose(pose.p, (r * sapien.Pose(q=pose.q)).q)
+
+
+def pick(s: SkillScript, actor: str, lift: float = 0.08, closing=None) -> sapien.Pose:
+    """Top-down grasp of an actor and a vertical lift; returns the grasp pose."""
+    g = top_grasp(s, actor, closing=closing)
+    s.grasp(g)
+    s.lift(lift)
+    return g
+
+
+def place_object(s: SkillScript, actor: str, p, yaw: float | None = None, clearance: float = 0.04,
+                 period: float = np.pi / 2) -> None:
+    """Carry the grasped `actor` so that its origin lands on `p` (its yaw, modulo `period`, on `yaw`),
+    using the actual hand-to-object transform; release and back off."""
+    obj = s.pose(actor)
+    hand_to_obj = s.tcp.inv() * obj
+    q = obj.q
+    if yaw is not None:
+        q = rotated(obj, [0, 0, 1], _wrap(yaw - _yaw(obj), period)).q
+    tcp = sapien.Pose(np.asarray(p, dtype=np.float64), q) * hand_to_obj.inv()
+    s.place(tcp, clearance=clearance)
+
+
+# -- solvers ------------------------------------------------------------------------------------
+def solve_pick_cube(s: SkillScript) -> None:
+    g = top_grasp(s, "cube")
+    s.grasp(g)
+    s.lift(0.05)
+    s.move(sapien.Pose(_xyz(s.u.goal_site.pose.p), g.q), speed=0.8)
+    s.hold(8)
+
+
+def solve_stack_cube(s: SkillScript) -> None:
+    g = top_grasp(s, "cubeA")
+    s.grasp(g)
+    s.lift(0.1)
+    above_b = _xyz(s.u.cubeB.pose.p) + np.array([0, 0, 2 * float(s.u.cube_half_size[2])])
+    offset = above_b - _xyz(s.u.cubeA.pose.p)
+    s.place(sapien.Pose(s.tcp.p + offset, g.q), clearance=0.03)
+    s.hold(4)
+
+
+def solve_push_cube(s: SkillScript) -> None:
+    q = s.tcp.q
+    obj = _xyz(s.u.obj.pose.p)
+    goal = _xyz(s.u.goal_region.pose.p)
+    s.push(sapien.Pose(obj + [-0.05, 0, 0], q), sapien.Pose(goal + [-0.09, 0, 0.0], q) * sapien.Pose(), speed=0.5)
+    s.hold(3)
+
+
+def solve_pull_cube(s: SkillScript) -> None:
+    q = s.tcp.q
+    obj = _xyz(s.u.obj.pose.p)
+    goal = _xyz(s.u.goal_region.pose.p)
+    s.push(sapien.Pose(obj + [0.05, 0, 0], q), sapien.Pose(goal + [0.06, 0, 0], q), speed=0.5)
+    s.hold(3)
+
+
+def solve_place_sphere(s: SkillScript) -> None:
+    g = top_grasp(s, "obj", yaw=np.pi / 4)
+    s.grasp(g)
+    s.lift(0.1)
+    goal = _xyz(s.u.bin.pose.p) + np.array([0, 0, 2 * float(np.asarray(s.u.block_half_size).reshape(-1)[2])])
+    offset = goal - _xyz(s.u.obj.pose.p)
+    s.place(sapien.Pose(s.tcp.p + offset, g.q), clearance=0.03)
+    s.hold(4)
+
+
+def solve_lift_peg_upright(s: SkillScript) -> None:
+    # Grasp the peg near its robot-side end, carry it closer to the base, then pitch the hand by ~90° about
+    # the closing axis so the peg hangs straight down (fingers end up pointing back at the robot: the other
+    # way round exceeds joint 6's range), stand it on the table and let go.
+    peg = s.pose("peg")
+    axis = _axis(peg, 0)
+    axis = axis if axis[0] >= 0 else -axis
+    g = top_grasp(s, "peg")
+    s.grasp(sapien.Pose(peg.p - 0.08 * axis, g.q))
+    s.lift(0.23)
+    s.move(sapien.Pose([-0.2, s._target.p[1], s._target.p[2]], s._target.q))
+    s.move(rotated(s._target, [0, 1, 0], 0.485 * np.pi), speed=0.6)
+    peg = s.pose("peg")
+    bottom = peg.p[2] - float(s.u.peg_half_length) * abs(_axis(peg, 0)[2])
+    s.move(sapien.Pose([0, 0, 0.002 - bottom]) * s._target, speed=0.5)
+    s.open_gripper()
+    s.move(s._target * sapien.Pose([0, 0, -0.05]), speed=0.6)
+    s.hold(4)
+
+
+def solve_poke_cube(s: SkillScript) -> None:
+    # Grasp the peg behind its middle (its head then reaches farther), slide it just above the table in line
+    # with the cube, then poke the cube forward with the peg's head until the cube sits on the goal.
+    u = s.u
+    peg = s.pose("peg")
+    s.grasp(sapien.Pose(peg.p - 0.06 * _axis(peg, 0), top_grasp(s, "peg").q))
+    s.lift(0.008)
+    cube, goal = _xyz(u.cube.pose.p), _xyz(u.goal_region.pose.p)
+    head = s.pose("peg").p + float(u.peg_half_length) * _axis(s.pose("peg"), 0)
+    s.move(sapien.Pose(s._target.p + [0, cube[1] - head[1], 0], s._target.q), speed=0.6)
+    travel = goal[0] - 0.015 - float(u.cube_half_size) - head[0]
+    s.move(sapien.Pose(s._target.p + [travel, 0, 0], s._target.q), speed=0.4)
+    s.hold(10)
+
+
+def solve_stack_pyramid(s: SkillScript) -> None:
+    # Put cube A beside cube B (yaw aligned, on B's free face nearest to A), then cube C across both. Fingers
+    # close across the A–B line so that they never come down between or onto the two cubes.
+    half = float(np.asarray(s.u.cube_half_size).reshape(-1)[0])
+    a, b, c = s.pose("cubeA"), s.pose("cubeB"), s.pose("cubeC")
+    sides = [b * sapien.Pose(d) for d in ([2.5 * half, 0, 0], [-2.5 * half, 0, 0], [0, 2.5 * half, 0],
+                                          [0, -2.5 * half, 0])]
+    sides = [p for p in sides if np.linalg.norm(p.p[:2] - c.p[:2]) > 4 * half] or sides
+    spot = min(sides, key=lambda p: np.linalg.norm(p.p[:2] - a.p[:2])).p
+    line = (spot - b.p) / np.linalg.norm(spot - b.p)
+    across = np.array([-line[1], line[0], 0.0])
+    turn = _wrap(_yaw(b) - _yaw(a), np.pi / 2)  # the carry turns A by this much
+    pick(s, "cubeA", closing=rotated(sapien.Pose(), [0, 0, 1], -turn).to_transformation_matrix()[:3, :3] @ across)
+    place_object(s, "cubeA", spot + [0, 0, 0.003], yaw=_yaw(b))
+    a = s.pose("cubeA")
+    turn = _wrap(_yaw(b) - _yaw(c), np.pi / 2)
+    pick(s, "cubeC", closing=rotated(sapien.Pose(), [0, 0, 1], -turn).to_transformation_matrix()[:3, :3] @ across)
+    place_object(s, "cubeC", (a.p + b.p) / 2 + [0, 0, 2 * half + 0.003], yaw=_yaw(b))
+    s.hold(6)
+
+
+def solve_roll_ball(s: SkillScript) -> None:
+    # Flick the ball with the fingers' flat front face (closing axis across the shot) straight at the goal,
+    # back off, and watch it roll until it is about the closest to the goal centre.
+    ball, goal = s.pose("ball").p, _xyz(s.u.goal_region.pose.p)
+    d = (goal - ball) * [1, 1, 0]
+    d /= np.linalg.norm(d)
+    y = _axis(s.tcp, 1)
+    q = rotated(s.tcp, [0, 0, 1], _wrap(np.arctan2(d[1], d[0]) + np.pi / 2 - np.arctan2(y[1], y[0]), np.pi)).q
+    s.push(sapien.Pose(ball - 0.07 * d, q), sapien.Pose(ball + 0.03 * d, q), speed=2.5)
+    s.move(sapien.Pose(s._target.p - 0.03 * d + [0, 0, 0.06], q))
+    best = np.inf
+    for _ in range(250 - len(s.actions)):
+        dist = float(np.linalg.norm(s.pose("ball").p[:2] - goal[:2]))
+        if dist < 0.02 or dist > best + 0.004:
+            break
+        best = min(best, dist)
+        s.hold(1)
+
+
+TASKS: dict[str, TaskSpec] = {t.name: t for t in (
+    TaskSpec("PickCube", ("cube",), "pick up the red cube and move it to the green goal", solve_pick_cube),
+    TaskSpec("StackCube", ("cubeA", "cubeB"), "stack the red cube on the green cube", solve_stack_cube),
+    TaskSpec("PushCube", ("obj",), "push the cube to the goal region", solve_push_cube),
+    TaskSpec("PullCube", ("obj",), "pull the cube to the goal region", solve_pull_cube),
+    TaskSpec("PlaceSphere", ("obj", "bin"), "place the sphere into the bin", solve_place_sphere),
+    TaskSpec("LiftPegUpright", ("peg",), "lift the peg and stand it upright", solve_lift_peg_upright),
+    TaskSpec("PokeCube", ("peg", "cube"), "use the peg to poke the cube into the goal region",
+             solve_poke_cube),
+    TaskSpec("RollBall", ("ball",), "roll the ball into the goal region", solve_roll_ball),
+    TaskSpec("StackPyramid", ("cubeA", "cubeB", "cubeC"),
+             "put the red cube next to the green cube and stack the blue cube on top of both", solve_stack_pyramid),
+)}
+
+
+def task_spec(name: str) -> TaskSpec:
+    if name not in TASKS:
+        raise KeyError(f"unknown ManiSkill task {name!r}; known: {', '.join(sorted(TASKS))}")
+    return TASKS[name]
+
+
+class ExpertSource:
+    """Scripted, replay-verified expert trajectories for one task (state-only envs, no rendering)."""
+
+    def __init__(self, task: str):
+        self.spec = task_spec(task)
+        self.script = SkillScript(task, self.spec.objects)
+        self.replayer = ManiSkillPlatform(task, render=False, objects=self.spec.objects)
+
+    def close(self) -> None:
+        self.script.close()
+        self.replayer.close()
+
+    def trajectory(self, seed: int) -> np.ndarray | None:
+        """The verified (T, 8) joint stream for `seed`, or None when the script or its replay fails."""
+        self.script.reset(seed)
+        try:
+            self.spec.solve(self.script)
+        except Exception:  # noqa: BLE001 - an unsolvable seed (IK or geometry failure) is just a miss
+            return None
+        actions = self.script.trajectory()
+        return actions if verify(self.replayer, seed, actions) else None

@@ -1,0 +1,123 @@
+"""Crash-safe per-slot staging: the resumable state of a build.
+
+A builder decides slots one at a time. A decided slot is a folder `slot_NNNNNN/` holding `slot.json`
+(its attempts, drop reasons and, when kept, the instance row) and one `<role>.npz` per rollout. The folder
+is written under a temporary name and renamed into place, so a killed build loses at most the slot in
+flight and never leaves a half-written slot behind. Assembly into LeRobot reads only decided slots.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from wsp_data.platforms.maniskill import Rollout
+
+SLOT_DIR = "slot_{slot:06d}"
+SLOT_JSON = "slot.json"
+CONFIG_JSON = "build_config.json"
+
+
+@dataclass
+class RolloutArrays:
+    """A rollout as stored: (T+1)-frame observation arrays and (T)-step action streams."""
+
+    role: str
+    seed: int
+    rgb: np.ndarray
+    mask: np.ndarray
+    qpos: np.ndarray
+    tcp_pose: np.ndarray
+    object_poses: np.ndarray
+    contacts: np.ndarray
+    success: np.ndarray
+    actions: np.ndarray
+    ee_actions: np.ndarray
+    intrinsic: np.ndarray
+    extrinsic: np.ndarray
+
+    @classmethod
+    def from_rollout(cls, role: str, ro: Rollout) -> RolloutArrays:
+        return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("qpos"), ro.stack("tcp_pose"),
+                   ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
+                   ro.ee_actions, ro.intrinsic, ro.extrinsic)
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.rgb)
+
+    def save(self, path: Path) -> None:
+        arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray)}
+        np.savez_compressed(path, role=np.array(self.role), seed=np.array(self.seed), **arrays)
+
+    @classmethod
+    def load(cls, path: Path) -> RolloutArrays:
+        with np.load(path) as z:
+            d = {k: z[k] for k in z.files}
+        return cls(role=str(d.pop("role")), seed=int(d.pop("seed")), **d)
+
+
+@dataclass
+class SlotRecord:
+    """The decision for one slot: every attempt with its outcome, and the kept instance row if any."""
+
+    slot: int
+    attempts: list[dict] = field(default_factory=list)
+    row: dict | None = None
+    roles: list[str] = field(default_factory=list)
+
+    @property
+    def kept(self) -> bool:
+        return self.row is not None
+
+
+class Staging:
+    """The staging folder of one config."""
+
+    def __init__(self, root: Path):
+        self.root = Path(root)
+
+    def slot_dir(self, slot: int) -> Path:
+        return self.root / SLOT_DIR.format(slot=slot)
+
+    def is_decided(self, slot: int) -> bool:
+        return (self.slot_dir(slot) / SLOT_JSON).exists()
+
+    def write_slot(self, record: SlotRecord, rollouts: list[RolloutArrays]) -> None:
+        final = self.slot_dir(record.slot)
+        tmp = final.with_name(final.name + f".tmp{os.getpid()}")
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir(parents=True)
+        for r in rollouts:
+            r.save(tmp / f"{r.role}.npz")
+        (tmp / SLOT_JSON).write_text(json.dumps(vars(record), indent=1, sort_keys=True, default=_jsonable))
+        shutil.rmtree(final, ignore_errors=True)
+        os.replace(tmp, final)
+
+    def read_slot(self, slot: int) -> SlotRecord:
+        path = self.slot_dir(slot) / SLOT_JSON
+        try:
+            return SlotRecord(**json.loads(path.read_text()))
+        except (json.JSONDecodeError, TypeError) as e:
+            raise ValueError(f"{path}: corrupt slot record ({e}); delete the slot folder to rebuild it") from e
+
+    def read_rollouts(self, slot: int, roles: list[str]) -> list[RolloutArrays]:
+        return [RolloutArrays.load(self.slot_dir(slot) / f"{role}.npz") for role in roles]
+
+    def clean_partial(self) -> None:
+        """Remove slot folders a killed build left under a temporary name."""
+        for p in self.root.glob("slot_*.tmp*"):
+            shutil.rmtree(p, ignore_errors=True)
+
+
+def _jsonable(x):
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")

@@ -1,0 +1,143 @@
+"""Assemble staged slots into one config of a release: a LeRobot v3.0 dataset written through lerobot's
+own API (near-lossless h264 yuv444p crf 0 video, PNG label masks), `wsp.*` episode columns in its
+episode table, and `instances.parquet` (one row per instance).
+
+Writes are deterministic (same staged input → byte-identical files) and atomic per config: the dataset is
+written beside its final place and swapped in when complete.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import io
+import json
+import logging
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from wsp_data.schema import (
+    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, VIDEO_KEY, frame_features,
+)
+from wsp_data.staging import RolloutArrays, SlotRecord
+
+REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
+
+
+def _frames(r: RolloutArrays, instruction: str):
+    last = len(r.actions) - 1
+    for t in range(r.num_frames):
+        a = min(t, last)  # the final frame repeats the last action (never executed)
+        yield {
+            VIDEO_KEY: r.rgb[t],
+            MASK_KEY: np.repeat(r.mask[t][..., None], 3, axis=2),
+            "observation.state": r.qpos[t],
+            "observation.ee_pose": r.tcp_pose[t],
+            "observation.object_poses": r.object_poses[t].reshape(-1),
+            "observation.contacts": r.contacts[t],
+            "action": r.actions[a],
+            "action.ee": r.ee_actions[a],
+            "next.success": np.array([r.success[t]]),
+            "task": instruction,
+        }
+
+
+def write_config(config_dir: Path, config: str, platform: str,
+                 instances: list[tuple[SlotRecord, list[RolloutArrays]]]) -> int:
+    """Write `config_dir` from kept slots (in slot order); returns the number of episodes written."""
+    from lerobot.configs.video import RGBEncoderConfig
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    info = PLATFORM_INFO[platform]
+    tmp = config_dir.with_name(config_dir.name + ".writing")
+    shutil.rmtree(tmp, ignore_errors=True)
+    logging.getLogger("lerobot").setLevel(logging.WARNING)
+    ds = LeRobotDataset.create(
+        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(), root=tmp,
+        robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
+    )
+    episode_rows: list[dict] = []
+    instance_rows: list[dict] = []
+    for record, rollouts in instances:
+        row = dict(record.row)
+        indices = []
+        for r in rollouts:
+            index = len(episode_rows)
+            with contextlib.redirect_stderr(io.StringIO()):
+                for frame in _frames(r, row["instruction"]):
+                    ds.add_frame(frame)
+                ds.save_episode(parallel_encoding=False)
+            indices.append(index)
+            episode_rows.append({
+                "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
+                "wsp.suite": row["suite"], "wsp.platform": platform, "wsp.task": row["task"],
+                "wsp.seed": int(r.seed), "wsp.role": r.role, "wsp.source": row["source"],
+                "wsp.intervention": json.dumps(row.get("interventions", {}).get(r.role, {}), sort_keys=True),
+                "wsp.objects": list(row["objects"]),
+                "wsp.camera_intrinsic": r.intrinsic.reshape(-1).astype(float).tolist(),
+                "wsp.camera_extrinsic": r.extrinsic.reshape(-1).astype(float).tolist(),
+                "wsp.success": bool(r.success[-1]), "wsp.num_frames": int(r.num_frames),
+            })
+        row.update(
+            roles=[r.role for r in rollouts], episode_indices=indices,
+            episode_ids=[EPISODE_ID.format(index=i) for i in indices],
+            num_frames=[int(r.num_frames) for r in rollouts], success=[bool(r.success[-1]) for r in rollouts],
+            fps=info.fps, camera_intrinsic=rollouts[0].intrinsic.reshape(-1).astype(float).tolist(),
+            camera_extrinsic=rollouts[0].extrinsic.reshape(-1).astype(float).tolist(),
+        )
+        instance_rows.append(row)
+    ds.finalize()
+    _drop_fingerprints(tmp)
+    _append_episode_columns(tmp, episode_rows)
+    _canonicalize_json(tmp / "meta" / "stats.json")
+    write_instances(tmp / INSTANCES, instance_rows)
+    shutil.rmtree(config_dir, ignore_errors=True)
+    tmp.rename(config_dir)
+    return len(episode_rows)
+
+
+def _append_episode_columns(root: Path, rows: list[dict]) -> None:
+    """Add the `wsp.*` episode-level fields to LeRobot's meta/episodes parquet files."""
+    for path in sorted(glob.glob(str(root / "meta" / "episodes" / "*" / "*.parquet"))):
+        table = pq.read_table(path)
+        eps = table.column("episode_index").to_pylist()
+        for key in rows[0] if rows else ():
+            table = table.append_column(key, pa.array([rows[e][key] for e in eps]))
+        pq.write_table(table, path)
+
+
+def _drop_fingerprints(root: Path) -> None:
+    """`datasets` stores a fingerprint derived from the output path in each data file's metadata; drop it so
+    the same build written to another folder is byte-identical."""
+    for path in sorted(glob.glob(str(root / "data" / "*" / "*.parquet"))):
+        table = pq.read_table(path)
+        meta = dict(table.schema.metadata or {})
+        if b"huggingface" in meta:
+            hf = json.loads(meta[b"huggingface"])
+            hf.pop("fingerprint", None)
+            meta[b"huggingface"] = json.dumps(hf).encode()
+            pq.write_table(table.replace_schema_metadata(meta), path)
+
+
+def _canonicalize_json(path: Path) -> None:
+    """lerobot writes stats keys in hash order; sort them so rebuilds are byte-identical."""
+    path.write_text(json.dumps(json.loads(path.read_text()), indent=4, sort_keys=True))
+
+
+def write_instances(path: Path, rows: list[dict]) -> None:
+    if not rows:
+        raise ValueError(f"{path}: no instances to write")
+    table = pa.Table.from_pylist([{k: _plain(v) for k, v in sorted(r.items())} for r in rows])
+    pq.write_table(table, path)
+
+
+def _plain(v):
+    if isinstance(v, dict):
+        return json.dumps(v, sort_keys=True)  # intervention parameters etc.: one JSON string column
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
