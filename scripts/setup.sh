@@ -8,6 +8,8 @@ STAMP="$VENV/.wsp-setup-stamp"
 KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" | sha256sum | cut -c1-16)"
 log() { printf '[wsp setup] %s\n' "$*" >&2; }
 die() { printf '[wsp setup] error: %s\n' "$*" >&2; exit 1; }
+# pip, minus the machine-level notes about unused local index folders
+pip_q() { "$VENV/bin/python" -m pip "$@" 2> >(grep -v -E "^WARNING: (Location '|Skipping opencv)" >&2); }
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else die "need root for: $*"; fi; }
 
@@ -59,13 +61,13 @@ python_env() {
   local py; py="$(find_python)"
   [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; "$py" -m venv "$VENV"; }
   log "installing pinned packages (first run downloads torch, a few minutes)"
-  "$VENV/bin/python" -m pip install -q --upgrade pip
-  "$VENV/bin/python" -m pip install -q -e "$ROOT"
+  pip_q install -q --upgrade pip
+  pip_q install -q -e "$ROOT"
   local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"
   if [ "$n" != 1 ]; then
     log "more than one OpenCV distribution present; keeping only opencv-python-headless"
-    "$VENV/bin/python" -m pip uninstall -q -y opencv-python opencv-contrib-python opencv-contrib-python-headless || true
-    "$VENV/bin/python" -m pip install -q --force-reinstall --no-deps "$("$VENV/bin/python" -m pip list --format=freeze | grep -i '^opencv-python-headless==')"
+    pip_q uninstall -q -y opencv-python opencv-contrib-python opencv-contrib-python-headless || true
+    pip_q install -q --force-reinstall --no-deps "$("$VENV/bin/python" -m pip list --format=freeze 2>/dev/null | grep -i '^opencv-python-headless==')"
   fi
 }
 

@@ -12,12 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 import sapien
+import trimesh
 from mani_skill.examples.motionplanning.base_motionplanner.utils import compute_grasp_info_by_obb, get_actor_obb
 
 from wsp_data.platforms.maniskill import ManiSkillPlatform
 from wsp_data.sources.skills import SkillScript, verify
 
 FINGER_LENGTH = 0.025
+TOOL_LEAN = 0.35  # rad the hand leans forward to hold a tool beyond a vertical hand's reach
 
 
 @dataclass(frozen=True)
@@ -67,8 +69,19 @@ def _yaw(pose: sapien.Pose) -> float:
     return float(np.arctan2(x[1], x[0]))
 
 
+def _angle(q) -> float:
+    """The rotation angle of a unit quaternion."""
+    return 2 * float(np.arccos(min(1.0, abs(float(q[0])))))
+
+
 def _wrap(angle: float, period: float = 2 * np.pi) -> float:
     return float((angle + period / 2) % period - period / 2)
+
+
+def _turn_z(v, angle: float) -> np.ndarray:
+    """A world vector turned by `angle` about the vertical."""
+    c, s_ = np.cos(angle), np.sin(angle)
+    return np.array([c * v[0] - s_ * v[1], s_ * v[0] + c * v[1], v[2]])
 
 
 def rotated(pose: sapien.Pose, axis, angle: float) -> sapien.Pose:
@@ -97,6 +110,34 @@ def place_object(s: SkillScript, actor: str, p, yaw: float | None = None, cleara
         q = rotated(obj, [0, 0, 1], _wrap(yaw - _yaw(obj), period)).q
     tcp = sapien.Pose(np.asarray(p, dtype=np.float64), q) * hand_to_obj.inv()
     s.place(tcp, clearance=clearance)
+
+
+def _pose(x) -> sapien.Pose:
+    """A batched ManiSkill pose (or a sapien pose) as a sapien pose of the first env."""
+    return x if isinstance(x, sapien.Pose) else x.sp
+
+
+def align_held(s: SkillScript, actor: str, target: sapien.Pose, rounds: int = 4, tol: float = 2e-4,
+               speed: float = 0.5) -> None:
+    """Bring a grasped actor onto the world pose `target`: move the hand by the measured correction, and
+    repeat (up to `rounds` more times) while the actor is off by more than `tol` metres, to take out grasp
+    slip and tracking error."""
+    for _ in range(rounds + 1):
+        fix = target * s.pose(actor).inv()
+        if np.linalg.norm(fix.p) < tol and _angle(fix.q) < 10 * tol:
+            break
+        s.move(fix * s._target, speed=speed, settle=3)
+
+
+def insert_held(s: SkillScript, actor: str, goal: sapien.Pose, standoff: float, depth: float = 0.0,
+                speed: float = 0.3) -> None:
+    """Insertion along the actor's local +x: line the grasped actor up `standoff` short of `goal` (a world
+    pose of the actor), then slide it in along that axis to `depth` past the goal."""
+    lift = max(0.0, goal.p[2] + 0.05 - s._target.p[2])
+    s.move(sapien.Pose([0, 0, lift]) * s._target, speed=0.8)
+    align_held(s, actor, goal * sapien.Pose([-standoff, 0, 0]))
+    axis = _axis(goal, 0)
+    s.move(sapien.Pose((standoff + depth) * axis) * s._target, speed=speed)
 
 
 # -- solvers ------------------------------------------------------------------------------------
@@ -191,11 +232,11 @@ def solve_stack_pyramid(s: SkillScript) -> None:
     line = (spot - b.p) / np.linalg.norm(spot - b.p)
     across = np.array([-line[1], line[0], 0.0])
     turn = _wrap(_yaw(b) - _yaw(a), np.pi / 2)  # the carry turns A by this much
-    pick(s, "cubeA", closing=rotated(sapien.Pose(), [0, 0, 1], -turn).to_transformation_matrix()[:3, :3] @ across)
+    pick(s, "cubeA", closing=_turn_z(across, -turn))
     place_object(s, "cubeA", spot + [0, 0, 0.003], yaw=_yaw(b))
     a = s.pose("cubeA")
     turn = _wrap(_yaw(b) - _yaw(c), np.pi / 2)
-    pick(s, "cubeC", closing=rotated(sapien.Pose(), [0, 0, 1], -turn).to_transformation_matrix()[:3, :3] @ across)
+    pick(s, "cubeC", closing=_turn_z(across, -turn))
     place_object(s, "cubeC", (a.p + b.p) / 2 + [0, 0, 2 * half + 0.003], yaw=_yaw(b))
     s.hold(6)
 
@@ -219,6 +260,57 @@ def solve_roll_ball(s: SkillScript) -> None:
         s.hold(1)
 
 
+def solve_pull_cube_tool(s: SkillScript) -> None:
+    # Grasp the L-tool's handle with the hand leaning forward (the cube lies beyond a vertical hand's reach),
+    # lift it, lower the hook just beyond the cube (the cube between handle and hook tip), then draw the tool
+    # back towards the base so the hook drags the cube along.
+    u = s.u
+    tool, cube = s.pose("l_shape_tool"), s.pose("cube")
+    g = top_grasp(s, "l_shape_tool")
+    g = rotated(g, [0, 1, 0], -TOOL_LEAN)  # the handle lies along x: pitch the fingers forward about y
+    grip_x = 0.06
+    s.grasp(sapien.Pose((tool * sapien.Pose([grip_x, 0, 0])).p, g.q))
+    s.lift(0.08)
+    hook_face = float(u.handle_length - u.hook_length)
+    origin = cube.p + [float(u.cube_half_size) + 0.012 - hook_face, -1.3 * float(u.width), 0]
+    tcp = sapien.Pose(origin + [grip_x, 0, s._target.p[2]], g.q)
+    s.move(tcp, speed=0.8)
+    s.move(sapien.Pose([tcp.p[0], tcp.p[1], g.p[2] + 0.004], g.q), speed=0.5)
+    base = _xyz(u.agent.robot.pose.p)
+    reach = np.sqrt(max(0.45 ** 2 - (cube.p[1] - base[1]) ** 2, 0.0))  # pull the cube to 0.45 m of the base
+    s.move(sapien.Pose(s._target.p - [cube.p[0] - (base[0] + reach), 0, 0], g.q), speed=0.5)
+    s.hold(4)
+
+
+def solve_peg_insertion_side(s: SkillScript) -> None:
+    # Grasp the peg on its white half, lift it, line it up 1 cm in front of the hole (closing the loop on the
+    # peg's measured pose), then slide it in along the hole axis.
+    u = s.u
+    half = float(u.peg_half_sizes[0, 0])
+    peg = s.pose("peg")
+    g = top_grasp(s, "peg")
+    s.grasp(sapien.Pose((peg * sapien.Pose([-max(0.05, half / 2 + 0.01), 0, 0])).p, g.q))
+    s.lift(0.1)
+    insert_held(s, "peg", _pose(u.goal_pose), standoff=half + 0.01, depth=0.02)
+    s.hold(3)
+
+
+def solve_plug_charger(s: SkillScript) -> None:
+    # Grasp the charger's base (hand pitched 15° back, as in ManiSkill's own solution), lift it, line its prongs
+    # up 5 cm in front of the receptacle and push them home.
+    u = s.u
+    base = _pose(u.charger_base_pose)
+    obb = trimesh.primitives.Box(extents=2 * np.asarray(u._base_size), transform=base.to_transformation_matrix())
+    info = compute_grasp_info_by_obb(obb, approaching=np.array([0, 0, -1]), target_closing=_axis(s.tcp, 1),
+                                     depth=FINGER_LENGTH)
+    g = u.agent.build_grasp_pose(np.array([0, 0, -1]), info["closing"], info["center"])
+    g = g * sapien.Pose(q=[np.cos(np.pi / 24), 0, np.sin(np.pi / 24), 0])
+    s.grasp(g, clearance=0.05)
+    s.lift(0.06)
+    insert_held(s, "charger", _pose(u.goal_pose), standoff=0.05, speed=0.2)
+    s.hold(3)
+
+
 TASKS: dict[str, TaskSpec] = {t.name: t for t in (
     TaskSpec("PickCube", ("cube",), "pick up the red cube and move it to the green goal", solve_pick_cube),
     TaskSpec("StackCube", ("cubeA", "cubeB"), "stack the red cube on the green cube", solve_stack_cube),
@@ -226,11 +318,15 @@ TASKS: dict[str, TaskSpec] = {t.name: t for t in (
     TaskSpec("PullCube", ("obj",), "pull the cube to the goal region", solve_pull_cube),
     TaskSpec("PlaceSphere", ("obj", "bin"), "place the sphere into the bin", solve_place_sphere),
     TaskSpec("LiftPegUpright", ("peg",), "lift the peg and stand it upright", solve_lift_peg_upright),
-    TaskSpec("PokeCube", ("peg", "cube"), "use the peg to poke the cube into the goal region",
-             solve_poke_cube),
+    TaskSpec("PokeCube", ("peg", "cube"), "use the peg to poke the cube into the goal region", solve_poke_cube),
     TaskSpec("RollBall", ("ball",), "roll the ball into the goal region", solve_roll_ball),
+    TaskSpec("PullCubeTool", ("l_shape_tool", "cube"), "use the L-shaped tool to pull the cube closer",
+             solve_pull_cube_tool),
     TaskSpec("StackPyramid", ("cubeA", "cubeB", "cubeC"),
              "put the red cube next to the green cube and stack the blue cube on top of both", solve_stack_pyramid),
+    TaskSpec("PegInsertionSide", ("peg", "box"), "insert the peg into the hole in the box",
+             solve_peg_insertion_side),
+    TaskSpec("PlugCharger", ("charger", "receptacle"), "plug the charger into the receptacle", solve_plug_charger),
 )}
 
 

@@ -1,0 +1,114 @@
+"""Sharding, crash + resume, determinism, and clear errors for bad arguments — on real builds."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from conftest import TINY
+from wsp_data.schema import RELEASE_JSON, STAGING_DIR
+
+WSP = [sys.executable, "-m", "wsp_data.cli"]
+
+
+def _build_args(out: Path, *extra: str) -> list[str]:
+    return [*WSP, "build", "--suite", TINY["suite"], "--platform", TINY["platform"], "--count", str(TINY["count"]),
+            "--tasks", *TINY["tasks"], "--out", str(out), "--quiet", *extra]
+
+
+def _files(release: Path) -> dict:
+    return json.loads((release / RELEASE_JSON).read_text())["files"]
+
+
+def test_sharded_killed_and_resumed_build_is_byte_identical(tmp_path, t1_release):
+    out = tmp_path / "worldsimprobe"
+    # Shard 0/2 decides slots 0 and 2 and must not assemble (slots 1 and 3 are another shard's).
+    done = subprocess.run(_build_args(out, "--shard", "0/2"), capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "not decided yet" in done.stdout and not (out / "t1_maniskill").exists()
+    staging = out / STAGING_DIR / "t1_maniskill"
+    assert sorted(p.name for p in staging.glob("slot_*")) == ["slot_000000", "slot_000002"]
+
+    # A full build is killed as soon as slot 1 is staged: at most the slot in flight is lost.
+    proc = subprocess.Popen(_build_args(out), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    deadline = time.time() + 600
+    while not (staging / "slot_000001" / "slot.json").exists():
+        assert proc.poll() is None and time.time() < deadline, "build ended before it could be killed"
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    if not (out / "t1_maniskill").exists():  # killed before it finished: the staged slots survive
+        assert (staging / "slot_000000").exists() and (staging / "slot_000001").exists()
+        resumed = subprocess.run(_build_args(out), capture_output=True, text=True, timeout=600)
+        assert resumed.returncode == 0, resumed.stderr
+    # Same config and seed → the same instances and the same checksums as the straight build.
+    assert _files(out) == _files(t1_release)
+    assert not (out / STAGING_DIR).exists()
+
+    again = subprocess.run(_build_args(out), capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0 and "up to date" in again.stdout
+
+
+def _wsp(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([*WSP, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_unknown_task_is_a_clear_error(tmp_path):
+    r = _wsp("build", "--suite", "t1", "--count", "2", "--tasks", "FlyToMoon", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "unknown task(s) FlyToMoon" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("count", ["0", "-3", "many"])
+def test_bad_count_is_a_clear_error(tmp_path, count):
+    r = _wsp("build", "--suite", "t1", "--count", count, "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "--count" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_unwritable_output_is_a_clear_error(tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("keep me")
+    r = _wsp("build", "--suite", "t1", "--count", "1", "--tasks", "PickCube", "--out", str(blocker / "release"))
+    assert r.returncode == 2 and "cannot write here" in r.stderr and str(blocker) in r.stderr
+    assert blocker.read_text() == "keep me"
+
+
+def test_foreign_folder_is_refused_and_left_alone(tmp_path):
+    (tmp_path / "notes.txt").write_text("mine")
+    r = _wsp("build", "--suite", "t1", "--count", "1", "--tasks", "PickCube", "--out", str(tmp_path))
+    assert r.returncode == 2 and "not a WorldSimProbe release" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_half_written_release_with_other_config_is_not_overwritten(tmp_path):
+    out = tmp_path / "worldsimprobe"
+    staged = out / STAGING_DIR / "t1_maniskill"
+    staged.mkdir(parents=True)
+    cfg = {**TINY, "tasks": list(TINY["tasks"]), "count": 9}
+    (staged / "build_config.json").write_text(json.dumps(cfg))
+    (staged / "slot_000000").mkdir()
+    (staged / "slot_000000" / "slot.json").write_text(json.dumps({"slot": 0, "attempts": [], "row": None, "roles": []}))
+    r = _wsp(*_build_args(out)[3:])
+    assert r.returncode == 2 and "different configuration" in r.stderr and "--restart" in r.stderr
+    assert (staged / "slot_000000" / "slot.json").exists()  # nothing lost
+
+
+def test_corrupt_release_json_names_the_file(tmp_path):
+    (tmp_path / RELEASE_JSON).write_text("{not json")
+    r = _wsp("info", str(tmp_path))
+    assert r.returncode == 2 and str(tmp_path / RELEASE_JSON) in r.stderr and "unreadable" in r.stderr
+    r = _wsp("build", "--suite", "t1", "--count", "1", "--tasks", "PickCube", "--out", str(tmp_path))
+    assert r.returncode == 2 and "unreadable" in r.stderr
+
+
+def test_info_on_non_release_is_a_clear_error(tmp_path):
+    r = _wsp("info", str(tmp_path))
+    assert r.returncode == 2 and "not a WorldSimProbe release" in r.stderr
