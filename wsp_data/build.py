@@ -90,24 +90,27 @@ def _open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
 def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
     """Try attempts for one slot until one is kept; stage the decision atomically."""
     cfg: BuildConfig = builder.config
-    task = cfg.task_of(slot)
+    plan = builder.plan(slot)
     record = SlotRecord(slot)
     rollouts: list[RolloutArrays] = []
     for a in range(cfg.max_attempts):
         seed = scene_seed(cfg.suite, slot, a)
         try:
-            out = builder.attempt(task, seed, cfg.rng(slot, a))
+            out = builder.attempt(plan, seed, cfg.rng(slot, a))
         except Exception as e:  # noqa: BLE001 - a simulator crash drops the proposal and is reported
-            print(f"[wsp build] slot {slot} attempt {a} ({task}, seed {seed}): {type(e).__name__}: {e}",
+            print(f"[wsp build] slot {slot} attempt {a} ({plan.task}, seed {seed}): {type(e).__name__}: {e}",
                   file=sys.stderr)
             out = None
-        entry = {"attempt": a, "seed": seed, "task": task,
+        entry = {"attempt": a, "seed": seed, "task": plan.task, "group": plan.group,
                  "outcome": "kept" if isinstance(out, Kept) else ("simulator_error" if out is None else out.reason),
-                 "rendered_steps": 0 if out is None else out.rendered_steps}
+                 "rendered_steps": 0 if out is None else out.rendered_steps,
+                 "simulated_steps": 0 if out is None else out.simulated_steps}
         record.attempts.append(entry)
         if isinstance(out, Kept):
             record.row = {**out.row, "suite": cfg.suite, "platform": cfg.platform, "slot": slot, "attempt": a,
                           "instance_id": INSTANCE_ID.format(config=cfg.name, slot=slot)}
+            if plan.group is not None:
+                record.row["group"] = plan.group
             record.roles = [r.role for r in out.rollouts]
             rollouts = out.rollouts
             break
@@ -145,37 +148,59 @@ def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers:
 
 # -- report ---------------------------------------------------------------------------------------------
 def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
-    """Proposed / kept / dropped per task and per reason (deterministic: no timings)."""
-    per_task: dict[str, dict] = defaultdict(lambda: {"proposed": 0, "kept": 0, "dropped": Counter()})
+    """Proposed / kept / dropped per task, per group (kind / primitive) and per reason, acceptance rates, and
+    the rendering that unrendered validation saved (deterministic: step counts, no timings)."""
+    def tally() -> dict:
+        return {"proposed": 0, "kept": 0, "dropped": Counter()}
+
+    per_task: dict[str, dict] = defaultdict(tally)
+    per_group: dict[str, dict] = defaultdict(tally)
     dropped: Counter = Counter()
-    rendered = rendered_kept = 0
+    steps = Counter()
     for r in records:
         for a in r.attempts:
-            t = per_task[a["task"]]
-            t["proposed"] += 1
-            rendered += a["rendered_steps"]
-            if a["outcome"] == "kept":
-                t["kept"] += 1
-                rendered_kept += a["rendered_steps"]
-            else:
-                t["dropped"][a["outcome"]] += 1
+            tallies = [per_task[a["task"]]] + ([per_group[a["group"]]] if a.get("group") else [])
+            kept = a["outcome"] == "kept"
+            for t in tallies:
+                t["proposed"] += 1
+                t["kept"] += kept
+                if not kept:
+                    t["dropped"][a["outcome"]] += 1
+            if not kept:
                 dropped[a["outcome"]] += 1
+            steps["rendered"] += a["rendered_steps"]
+            steps["simulated"] += a.get("simulated_steps", 0)
+            if not kept and a["rendered_steps"] == 0:
+                steps["render_avoided"] += a.get("simulated_steps", 0)
+
+    def finish(t: dict) -> dict:
+        return {**t, "dropped": dict(sorted(t["dropped"].items())),
+                "acceptance_rate": round(t["kept"] / t["proposed"], 4) if t["proposed"] else None}
+
+    proposed = sum(len(r.attempts) for r in records)
     kept = sum(r.kept for r in records)
     return {
         "config": config.name, "build_config": config.to_json(), "requested": config.count, "kept": kept,
-        "exhausted_slots": [r.slot for r in records if not r.kept],
-        "proposed": sum(len(r.attempts) for r in records), "dropped": dict(sorted(dropped.items())),
-        "per_task": {k: {**v, "dropped": dict(sorted(v["dropped"].items()))} for k, v in sorted(per_task.items())},
-        "rendered_steps": rendered, "rendered_steps_in_kept": rendered_kept,
+        "exhausted_slots": [r.slot for r in records if not r.kept], "proposed": proposed,
+        "acceptance_rate": round(kept / proposed, 4) if proposed else None, "dropped": dict(sorted(dropped.items())),
+        "per_task": {k: finish(v) for k, v in sorted(per_task.items())},
+        "per_group": {k: finish(v) for k, v in sorted(per_group.items())},
+        "rendered_steps": steps["rendered"], "unrendered_steps": steps["simulated"],
+        "rendered_steps_avoided": steps["render_avoided"],
     }
 
 
 def format_report(report: dict) -> str:
     lines = [f"{report['config']}: kept {report['kept']} / {report['requested']} requested, "
-             f"{report['proposed']} proposals", f"{'task':<18} {'proposed':>8} {'kept':>5}  dropped by reason"]
-    for task, t in report["per_task"].items():
-        reasons = ", ".join(f"{k}={v}" for k, v in t["dropped"].items()) or "-"
-        lines.append(f"{task:<18} {t['proposed']:>8} {t['kept']:>5}  {reasons}")
+             f"{report['proposed']} proposals (acceptance {report['acceptance_rate']:.0%}); rendered "
+             f"{report['rendered_steps']} steps, validation without rendering avoided {report['rendered_steps_avoided']}"]
+    for title, table in (("task", report["per_task"]), ("group", report["per_group"])):
+        if not table:
+            continue
+        lines.append(f"{title:<18} {'proposed':>8} {'kept':>5} {'accept':>7}  dropped by reason")
+        for name, t in table.items():
+            reasons = ", ".join(f"{k}={v}" for k, v in t["dropped"].items()) or "-"
+            lines.append(f"{name:<18} {t['proposed']:>8} {t['kept']:>5} {t['acceptance_rate']:>7.0%}  {reasons}")
     if report["exhausted_slots"]:
         lines.append(f"{len(report['exhausted_slots'])} slot(s) found no valid instance in "
                      f"{report['build_config']['max_attempts']} attempts: {report['exhausted_slots'][:10]}")

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from wsp_data.schema import DEFAULT_RELEASE_NAME, PLATFORMS, SUITES
 
-PAPER_COUNTS = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360}
+PAPER_COUNTS = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360, "train": 1100}
 
 
 class CliError(Exception):

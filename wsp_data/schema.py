@@ -29,7 +29,7 @@ CONFIG_NAME = "{suite}_{platform}"  # e.g. t1_maniskill
 EPISODE_ID = "episode_{index:06d}"  # submission path component: <config>/<episode_id>/seed<k>.mp4
 INSTANCE_ID = "{config}/{slot:06d}"
 
-SUITES = ("t1", "t2", "t3", "t4", "t5")
+SUITES = ("t1", "t2", "t3", "t4", "t5", "train")
 PLATFORMS = ("maniskill",)
 
 # Disjoint scene-seed ranges: a suite's slot k, attempt a uses base + 100·k + a (a < MAX_ATTEMPTS).

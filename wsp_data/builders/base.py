@@ -1,7 +1,8 @@
 """What every suite builder shares: the build config, the attempt outcome types, and the `SuiteBuilder`
 base class whose hooks a suite module fills in.
 
-A build has `count` slots. Slot k is balanced onto task `tasks[k % len(tasks)]` and tries attempts
+A build has `count` slots. Slot k is planned by `SuiteBuilder.plan(k)` (default: task `tasks[k % len(tasks)]`,
+no group; suites balanced by kind or primitive override it) and tries attempts
 a = 0, 1, … (scene seed `scene_seed(suite, k, a)`, proposal RNG seeded by (build seed, k, a)) until one
 is kept or `max_attempts` are spent. A slot's outcome depends only on (config, k): shards, workers and
 resumed runs therefore produce the same instances.
@@ -68,11 +69,16 @@ class BuildConfig:
 
 @dataclass
 class Kept:
-    """An accepted proposal: the instance row (suite-specific fields) and its rollouts in role order."""
+    """An accepted proposal: the instance row (suite-specific fields) and its rollouts in role order.
+
+    The row must hold `task`, `seed`, `instruction`, `objects` (pose/contact columns, in order) and `source`;
+    `interventions` ({role: parameters}) is optional. `rendered_steps` / `simulated_steps` count the
+    rendered and unrendered simulator steps the proposal cost (build report: rendering saved)."""
 
     row: dict
     rollouts: list[RolloutArrays]
     rendered_steps: int = 0
+    simulated_steps: int = 0
 
 
 @dataclass
@@ -81,7 +87,16 @@ class Dropped:
 
     reason: str
     rendered_steps: int = 0
+    simulated_steps: int = 0
     detail: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SlotPlan:
+    """What a slot must produce: its task and, for suites balanced by kind or primitive, its group."""
+
+    task: str
+    group: str | None = None
 
 
 class SuiteBuilder(ABC):
@@ -90,7 +105,8 @@ class SuiteBuilder(ABC):
     Roles:
         `roles`: the rollouts of one instance, in order (e.g. original, small, large).
     Hooks:
-        `attempt(task, seed, rng)`: propose, execute (unrendered first), validate, render what passed.
+        `plan(slot)`: the slot's task (and group); default balances slots over the config's tasks.
+        `attempt(plan, seed, rng)`: propose, execute (unrendered first), validate, render what passed.
         `close()`: release simulator resources.
     """
 
@@ -102,9 +118,12 @@ class SuiteBuilder(ABC):
     def __init__(self, config: BuildConfig):
         self.config = config
 
+    def plan(self, slot: int) -> SlotPlan:
+        return SlotPlan(self.config.task_of(slot))
+
     @abstractmethod
-    def attempt(self, task: str, seed: int, rng: np.random.Generator) -> Kept | Dropped:
-        """Try one proposal for `task` at scene seed `seed`."""
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        """Try one proposal for `plan.task` (and `plan.group`) at scene seed `seed`."""
 
     def close(self) -> None:
         """Release simulator resources."""

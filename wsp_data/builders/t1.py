@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SuiteBuilder
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
 from wsp_data.schema import FPS
@@ -75,7 +75,8 @@ class T1Builder(SuiteBuilder):
         out[start:start + WINDOW, dim] += direction * magnitude
         return out
 
-    def attempt(self, task: str, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        task = plan.task
         rig = self.rig(task)
         source = rig.expert.trajectory(seed)
         if source is None:
@@ -88,26 +89,28 @@ class T1Builder(SuiteBuilder):
         small, large = sorted(float(m) for m in rng.choice(MAGNITUDES, size=2, replace=False))
         streams = {"original": source, "small": self.perturb(source, dim, direction, start, small),
                    "large": self.perturb(source, dim, direction, start, large)}
+        simulated = 0
         for role in ("small", "large"):  # unrendered validation first: rejected proposals cost no rendering
             ro = rig.state.replay(seed, streams[role])
+            simulated += len(streams[role])
             if (why := rig.invalid(ro)) is not None:
-                return Dropped(why)
+                return Dropped(why, simulated_steps=simulated)
             if not ro.success:
-                return Dropped("variant_failed")
+                return Dropped("variant_failed", simulated_steps=simulated)
         rendered = {role: rig.render.replay(seed, s) for role, s in streams.items()}
         steps = sum(len(s) for s in streams.values())
         for role, ro in rendered.items():
             if not ro.success:
-                return Dropped("rendered_reference_failed", steps, {"role": role})
+                return Dropped("rendered_reference_failed", steps, simulated, {"role": role})
             if (why := rig.invalid(ro)) is not None:
-                return Dropped(why, steps)
+                return Dropped(why, steps, simulated)
         rgb = {role: ro.stack("rgb") for role, ro in rendered.items()}
         d_os = aligned_mse(rgb["original"], rgb["small"], FPS, FPS)
         d_ol = aligned_mse(rgb["original"], rgb["large"], FPS, FPS)
         if d_os <= 0:
-            return Dropped("zero_response", steps)
+            return Dropped("zero_response", steps, simulated)
         if not d_os < d_ol:
-            return Dropped("not_monotone", steps)
+            return Dropped("not_monotone", steps, simulated)
         window = {"dim": dim, "direction": direction, "start": start, "end": start + WINDOW}
         row = {
             "task": task, "seed": seed, "instruction": rig.spec.instruction, "objects": list(rig.spec.objects),
@@ -117,4 +120,4 @@ class T1Builder(SuiteBuilder):
             "interventions": {"original": {}, "small": {**window, "magnitude": small},
                               "large": {**window, "magnitude": large}},
         }
-        return Kept(row, [RolloutArrays.from_rollout(role, rendered[role]) for role in self.roles], steps)
+        return Kept(row, [RolloutArrays.from_rollout(role, rendered[role]) for role in self.roles], steps, simulated)

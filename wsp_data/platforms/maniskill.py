@@ -21,9 +21,11 @@ from wsp_data.schema import ACTION_DIM, IMAGE_SIZE, MAX_OBJECTS
 
 configure_cpu_rendering()
 
-import gymnasium as gym  # noqa: E402
 import mani_skill.envs  # noqa: E402,F401  (registers the tasks)
+import sapien  # noqa: E402
 import torch  # noqa: E402
+from mani_skill.utils.registration import REGISTERED_ENVS  # noqa: E402
+from mani_skill.utils.structs import Pose  # noqa: E402
 from mani_skill.utils.geometry import rotation_conversions  # noqa: E402
 from mani_skill.utils.structs import Actor, Link  # noqa: E402
 
@@ -41,6 +43,52 @@ GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
 
 class PlatformError(RuntimeError):
     """A task or stream the platform cannot run."""
+
+
+@dataclass(frozen=True)
+class ExtraActor:
+    """A rigid primitive added to a task's scene by the scene loader (a ManiSkill scene hook), so existing
+    segmentation ids do not change. It starts parked out of view behind the camera; `reset(...,
+    placements={name: pose})` puts it into the scene for an episode."""
+
+    name: str
+    shape: str  # "box" (half_size = half extents) or "sphere" (half_size[0] = radius)
+    half_size: tuple[float, float, float]
+    color: tuple[float, float, float, float] = (0.15, 0.35, 0.85, 1.0)
+    density: float = 1000.0
+
+    def add_to(self, builder) -> None:
+        material = sapien.render.RenderMaterial(base_color=list(self.color))
+        if self.shape == "box":
+            builder.add_box_collision(half_size=self.half_size, density=self.density)
+            builder.add_box_visual(half_size=self.half_size, material=material)
+        elif self.shape == "sphere":
+            builder.add_sphere_collision(radius=self.half_size[0], density=self.density)
+            builder.add_sphere_visual(radius=self.half_size[0], material=material)
+        else:
+            raise PlatformError(f"unsupported extra actor shape {self.shape!r}")
+
+
+PARKING = np.array([2.0, 2.0, 0.0])  # behind the base camera, off the table
+
+
+def _env_class(env_id: str, extras: tuple[ExtraActor, ...]):
+    """The task's env class, or a subclass whose scene loader also builds `extras`."""
+    base = REGISTERED_ENVS[env_id].cls
+    if not extras:
+        return base
+
+    class SceneWithExtras(base):
+        def _load_scene(self, options: dict):
+            super()._load_scene(options)
+            for i, extra in enumerate(extras):
+                builder = self.scene.create_actor_builder()
+                extra.add_to(builder)
+                builder.initial_pose = sapien.Pose(PARKING + [0.5 * i, 0, extra.half_size[2]])
+                setattr(self, extra.name, builder.build(name=extra.name))
+
+    SceneWithExtras.__name__ = f"{base.__name__}WithExtras"
+    return SceneWithExtras
 
 
 @dataclass
@@ -84,15 +132,15 @@ class ManiSkillPlatform:
     """One ManiSkill env for one task, kept alive across many rollouts."""
 
     def __init__(self, task: str, *, render: bool = True, control_mode: str = "pd_joint_pos",
-                 objects: tuple[str, ...] = ()):
+                 objects: tuple[str, ...] = (), extras: tuple[ExtraActor, ...] = ()):
         self.task, self.render, self.control_mode = task, render, control_mode
         env_id = task if task.endswith("-v1") else f"{task}-v1"
-        if env_id not in gym.registry:
+        if env_id not in REGISTERED_ENVS:
             raise PlatformError(f"unknown ManiSkill task {task!r}")
-        with contextlib.redirect_stdout(io.StringIO()):
-            self.env = gym.make(
-                env_id, obs_mode="rgb+segmentation" if render else "state_dict", sim_backend="physx_cpu",
-                render_backend="cpu", control_mode=control_mode, num_envs=1, max_episode_steps=100_000,
+        with contextlib.redirect_stdout(io.StringIO()):  # ManiSkill's own `make` instantiates the class
+            self.env = _env_class(env_id, tuple(extras))(
+                obs_mode="rgb+segmentation" if render else "state_dict", sim_backend="physx_cpu",
+                render_backend="cpu", control_mode=control_mode, num_envs=1,
                 sensor_configs=dict(width=IMAGE_SIZE, height=IMAGE_SIZE),
             )
         self.u = self.env.unwrapped
@@ -138,13 +186,22 @@ class ManiSkillPlatform:
             if name != CAMERA:
                 del self.u._sensors[name]
 
-    def reset(self, seed: int) -> Observation:
-        """Rebuild the scene and reset it to `seed`. A plain reset keeps PhysX state from earlier episodes
-        (measured: the same stream replayed after another episode drifts by 5e-4 rad); rebuilding (~0.2 s)
-        makes every rollout independent of the env's history, so shards, workers and resumed builds agree."""
+    def reset(self, seed: int, placements: dict[str, np.ndarray] | None = None) -> Observation:
+        """Rebuild the scene and reset it to `seed`, then move actors to `placements` (name → world pose
+        xyz + quaternion wxyz, at rest). A plain reset keeps PhysX state from earlier episodes (measured:
+        the same stream replayed after another episode drifts by 5e-4 rad); rebuilding (~0.2 s) makes every
+        rollout independent of the env's history, so shards, workers and resumed builds agree."""
         obs, _ = self.env.reset(seed=int(seed), options={"reconfigure": True})
         self._prune_sensors()
         self._lut = None  # segmentation ids are re-read from the rebuilt scene
+        if placements:
+            for name, pose in placements.items():
+                pose = torch.as_tensor(np.asarray(pose, dtype=np.float32))[None]
+                actor = self.actor(name)
+                actor.set_pose(Pose.create_from_pq(pose[:, :3], pose[:, 3:]))
+                actor.set_linear_velocity(torch.zeros(1, 3))
+                actor.set_angular_velocity(torch.zeros(1, 3))
+            obs = self.u.get_obs()
         return self._observe(obs)
 
     def step(self, action: np.ndarray) -> Observation:
@@ -203,8 +260,8 @@ class ManiSkillPlatform:
         return np.array([*pose.p, *euler, joint_action[7]], dtype=np.float32)
 
     # -- replay -----------------------------------------------------------------------------------
-    def replay(self, seed: int, actions: np.ndarray) -> Rollout:
-        """Reset to `seed` and execute a (T, 8) `pd_joint_pos` stream, recording every frame."""
+    def replay(self, seed: int, actions: np.ndarray, placements: dict[str, np.ndarray] | None = None) -> Rollout:
+        """Reset to `seed` (and `placements`) and execute a (T, 8) `pd_joint_pos` stream, recording every frame."""
         actions = np.asarray(actions, dtype=np.float32)
         if actions.ndim != 2 or actions.shape[1] != ACTION_DIM or len(actions) == 0:
             raise PlatformError(f"expected a (T, {ACTION_DIM}) action stream, got shape {actions.shape}")
@@ -213,7 +270,7 @@ class ManiSkillPlatform:
         if self.control_mode != "pd_joint_pos":
             raise PlatformError("replay needs a pd_joint_pos platform")
         ro = Rollout(self.task, int(seed), actions, np.stack([self.ee_action(a) for a in actions]))
-        ro.observations.append(self.reset(seed))
+        ro.observations.append(self.reset(seed, placements))
         if self.render:
             ro.intrinsic, ro.extrinsic = self.camera_params()
         for a in actions:
