@@ -13,7 +13,7 @@ from pathlib import Path
 
 from wsp_data.schema import DEFAULT_RELEASE_NAME, PLATFORMS, SUITES
 
-PAPER_COUNTS = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360, "train": 1100}
+PAPER_COUNTS = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360}  # ManiSkill, paper Table S3
 
 
 class CliError(Exception):
@@ -46,7 +46,8 @@ def parser() -> argparse.ArgumentParser:
     b = sub.add_parser("build", help="build (or resume) one suite×platform config of a release")
     b.add_argument("--platform", choices=PLATFORMS, default="maniskill")
     b.add_argument("--suite", choices=SUITES, required=True)
-    b.add_argument("--count", type=_positive, help="instances to build (default: the paper's count for the suite)")
+    b.add_argument("--count", type=_positive,
+                   help="instances to build (default: the paper's count; train: 100 episodes per task)")
     b.add_argument("--out", type=Path, default=Path(DEFAULT_RELEASE_NAME), help="release folder (default: ./worldsimprobe)")
     b.add_argument("--tasks", nargs="+", help="restrict to these tasks (default: all solved benchmark tasks)")
     b.add_argument("--seed", type=int, default=0, help="build seed (default 0)")
@@ -67,6 +68,7 @@ def parser() -> argparse.ArgumentParser:
 def cmd_build(args) -> int:
     from wsp_data.build import BuildError, build, format_report
     from wsp_data.builders import BuildConfig, builder_class
+    from wsp_data.builders.train import EPISODES_PER_TASK
     from wsp_data.sources.experts import TASKS
 
     try:
@@ -78,8 +80,8 @@ def cmd_build(args) -> int:
     if unknown:
         raise CliError(f"unknown task(s) {', '.join(unknown)}; known: {', '.join(TASKS)}")
     try:
-        config = BuildConfig(args.suite, args.platform, args.count or PAPER_COUNTS[args.suite], tasks, args.seed,
-                             args.max_attempts)
+        count = args.count or PAPER_COUNTS.get(args.suite) or EPISODES_PER_TASK * len(tasks)
+        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet)
     except (BuildError, ValueError) as e:

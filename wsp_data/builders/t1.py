@@ -14,36 +14,14 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
+from wsp_data.builders.rig import RigCache
 from wsp_data.schema import FPS
-from wsp_data.sources.experts import ExpertSource, task_spec
 from wsp_data.staging import RolloutArrays
 from wsp_eval.video import aligned_mse
 
 MAGNITUDES = (0.0025, 0.005, 0.010, 0.015, 0.020)
 WINDOW = 20  # steps (1 s at 20 Hz)
 PERTURBED_DIMS = 7  # the 7 arm joints; the gripper (dim 7) is never perturbed
-
-
-class _TaskRig:
-    """The simulator resources of one task in one worker: expert source, unrendered and rendered replays."""
-
-    def __init__(self, task: str):
-        spec = task_spec(task)
-        self.spec = spec
-        self.expert = ExpertSource(task)
-        self.state = self.expert.replayer
-        self.render = ManiSkillPlatform(task, render=True, objects=spec.objects)
-        self.qlimits = _np(self.state.robot.get_qlimits()[0])
-
-    def close(self) -> None:
-        self.expert.close()
-        self.render.close()
-
-    def invalid(self, ro: Rollout) -> str | None:
-        return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
-                             self.qlimits)
 
 
 class T1Builder(SuiteBuilder):
@@ -57,17 +35,10 @@ class T1Builder(SuiteBuilder):
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self._rigs: dict[str, _TaskRig] = {}
-
-    def rig(self, task: str) -> _TaskRig:
-        if task not in self._rigs:
-            self._rigs[task] = _TaskRig(task)
-        return self._rigs[task]
+        self.rig = RigCache()
 
     def close(self) -> None:
-        for r in self._rigs.values():
-            r.close()
-        self._rigs.clear()
+        self.rig.close()
 
     @staticmethod
     def perturb(actions: np.ndarray, dim: int, direction: int, start: int, magnitude: float) -> np.ndarray:

@@ -1,0 +1,45 @@
+"""`train_<platform>`: expert rollouts for training world models (issue: training split).
+
+Each instance is one rendered, replay-verified scripted-expert episode (role `expert`) of a benchmark task,
+on scene seeds from the training range (`SEED_BASE["train"]`), disjoint from every test suite's range, in
+the same LeRobot format as the test configs, so LeRobot's own dataloader trains on it directly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
+from wsp_data.staging import RolloutArrays
+
+EPISODES_PER_TASK = 100  # default size: 100 expert episodes per task
+
+
+class TrainBuilder(SuiteBuilder):
+    suite = "train"
+    title = "Training split"
+    description = ("Scripted-expert rollouts of the benchmark tasks on training-range scene seeds (disjoint from "
+                   "every test suite), one episode per row, for training world models with LeRobot's dataloader.")
+    roles = ("expert",)
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        self.rig = RigCache()
+
+    def close(self) -> None:
+        self.rig.close()
+
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        rig = self.rig(plan.task)
+        actions = rig.expert.trajectory(seed)  # scripted and verified unrendered
+        if actions is None:
+            return Dropped("source_failed")
+        ro = rig.render.replay(seed, actions)
+        if not ro.success:
+            return Dropped("rendered_reference_failed", len(actions), len(actions))
+        if (why := rig.invalid(ro)) is not None:
+            return Dropped(why, len(actions), len(actions))
+        row = {"task": plan.task, "seed": seed, "instruction": rig.spec.instruction,
+               "objects": list(rig.spec.objects), "source": "scripted_expert"}
+        return Kept(row, [RolloutArrays.from_rollout("expert", ro)], len(actions), len(actions))
