@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SuiteBuilder
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.t1 import T1Builder
+from wsp_data.builders.train import TrainBuilder
 
-BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder,)}
+BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder, TrainBuilder,)}
 
 
 def builder_class(suite: str) -> type[SuiteBuilder]:
@@ -14,4 +15,4 @@ def builder_class(suite: str) -> type[SuiteBuilder]:
     return BUILDERS[suite]
 
 
-__all__ = ["BUILDERS", "BuildConfig", "Dropped", "Kept", "SuiteBuilder", "builder_class"]
+__all__ = ["BUILDERS", "BuildConfig", "Dropped", "Kept", "SlotPlan", "SuiteBuilder", "builder_class"]
