@@ -3,6 +3,8 @@
     wsp build --platform maniskill --suite t1 --count N --out DIR   build (or resume) a config of a release
     wsp info DIR                                                     what a release holds
     wsp sources [--seeds N]                                          scripted expert success per task
+    wsp validate SUBMISSION --release DIR                            check a submission, score nothing
+    wsp baseline NAME --release DIR --out SUBMISSION                 write a calibration-baseline submission
 """
 
 from __future__ import annotations
@@ -62,6 +64,13 @@ def parser() -> argparse.ArgumentParser:
     s.add_argument("--seeds", type=_positive, default=20)
     s.add_argument("--tasks", nargs="+")
     s.add_argument("--out", type=Path, help="also write the Markdown table here")
+    v = sub.add_parser("validate", help="check a submission against a release without scoring it")
+    v.add_argument("submission", type=Path)
+    v.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    bl = sub.add_parser("baseline", help="write a calibration-baseline submission (oracle, static)")
+    bl.add_argument("name")
+    bl.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    bl.add_argument("--out", type=Path, required=True)
     return p
 
 
@@ -122,10 +131,43 @@ def cmd_sources(args) -> int:
     return survey.main(argv) or 0
 
 
+def _release_or_error(path: Path) -> Path:
+    from wsp_data.release import ReleaseError, load_release
+
+    try:
+        load_release(path)
+    except ReleaseError as e:
+        raise CliError(str(e)) from None
+    return path
+
+
+def cmd_validate(args) -> int:
+    from wsp_eval.submission import validate
+
+    problems = validate(args.submission, _release_or_error(args.release))
+    for p in problems:
+        print(f"{args.submission}/{p}")
+    print(f"{len(problems)} problem(s) in {args.submission}" if problems else f"{args.submission}: valid")
+    return 1 if problems else 0
+
+
+def cmd_baseline(args) -> int:
+    from wsp_eval.baselines import write_baseline
+
+    try:
+        n = write_baseline(args.name, _release_or_error(args.release), args.out)
+    except KeyError as e:
+        raise CliError(e.args[0]) from None
+    print(f"wrote {n} videos of baseline {args.name!r} to {args.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
-        return {"build": cmd_build, "info": cmd_info, "sources": cmd_sources}[args.command](args)
+        commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
+                    "baseline": cmd_baseline}
+        return commands[args.command](args)
     except CliError as e:
         print(f"wsp: error: {e}", file=sys.stderr)
         return 2

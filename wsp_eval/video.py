@@ -31,3 +31,48 @@ def aligned_mse(base: np.ndarray, other: np.ndarray, base_fps: float, other_fps:
     j = nearest_indices(to, tb[keep]) if len(other) > 1 else np.zeros(int(keep.sum()), dtype=int)
     diff = base[keep].astype(np.float64) - other[j].astype(np.float64)
     return float(np.mean(diff * diff))
+
+
+class VideoError(ValueError):
+    """A video that cannot be used; the message names the file."""
+
+
+MIN_FPS, MAX_FPS = 1.0, 240.0  # a submission's fps outside this range is treated as absurd
+
+
+def read_video(path) -> tuple[np.ndarray, float]:
+    """Decode every frame of a video file as RGB uint8 (N, H, W, 3) and return it with its fps."""
+    import av
+
+    try:
+        with av.open(str(path)) as container:
+            if not container.streams.video:
+                raise VideoError(f"{path}: no video stream")
+            stream = container.streams.video[0]
+            rate = stream.average_rate or stream.guessed_rate
+            frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
+    except VideoError:
+        raise
+    except (av.error.FFmpegError, OSError, ValueError) as e:
+        raise VideoError(f"{path}: unreadable video ({type(e).__name__}: {e})") from e
+    fps = float(rate) if rate else float("nan")
+    return (np.stack(frames) if frames else np.zeros((0, 0, 0, 3), np.uint8)), fps
+
+
+def write_video(path, frames: np.ndarray, fps: float) -> None:
+    """Write RGB uint8 frames (N, H, W, 3) as near-lossless h264 (yuv444p, crf 0) mp4."""
+    import av
+
+    frames = np.asarray(frames, dtype=np.uint8)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
+        raise VideoError(f"{path}: expected frames of shape (N, H, W, 3), got {frames.shape}")
+    with av.open(str(path), "w") as container:
+        stream = container.add_stream("libx264", rate=int(round(fps)))
+        stream.width, stream.height = frames.shape[2], frames.shape[1]
+        stream.pix_fmt = "yuv444p"
+        stream.options = {"crf": "0", "preset": "medium", "threads": "1"}
+        for frame in frames:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)

@@ -1,0 +1,71 @@
+"""Read reference rollouts from a release without LeRobot's dataloader or a simulator: episode rows, the
+reference video segment of an episode inside its shared v3.0 video file, and the robot label masks."""
+
+from __future__ import annotations
+
+import glob
+import io
+import json
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from wsp_data.schema import MASK_KEY, VIDEO_KEY
+from wsp_eval.video import VideoError
+
+
+@lru_cache(maxsize=32)
+def episodes(config_dir: Path) -> dict[int, dict]:
+    """episode_index → its row of meta/episodes (LeRobot columns + wsp.* fields)."""
+    rows = {}
+    for path in sorted(glob.glob(str(Path(config_dir) / "meta" / "episodes" / "*" / "*.parquet"))):
+        cols = [c for c in pq.read_schema(path).names if not c.startswith("stats/")]
+        for r in pq.read_table(path, columns=cols).to_pylist():
+            rows[r["episode_index"]] = r
+    return rows
+
+
+def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
+    """The reference video of one episode, RGB uint8 (length, H, W, 3), decoded from its shared file."""
+    import av
+
+    config_dir = Path(config_dir)
+    ep = episodes(config_dir)[episode_index]
+    info = json.loads((config_dir / "meta" / "info.json").read_text())
+    key = f"videos/{VIDEO_KEY}"
+    path = config_dir / info["video_path"].format(video_key=VIDEO_KEY, chunk_index=ep[f"{key}/chunk_index"],
+                                                  file_index=ep[f"{key}/file_index"])
+    start, fps, n = ep[f"{key}/from_timestamp"], info["fps"], ep["length"]
+    first = int(round(start * fps))
+    frames = []
+    try:
+        with av.open(str(path)) as container:
+            stream = container.streams.video[0]
+            container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
+            for f in container.decode(stream):
+                j = int(round(float(f.pts * stream.time_base) * fps))
+                if j >= first + n:
+                    break
+                if j >= first:
+                    frames.append(f.to_ndarray(format="rgb24"))
+    except av.error.FFmpegError as e:
+        raise VideoError(f"{path}: unreadable reference video ({e})") from e
+    if len(frames) != n:
+        raise VideoError(f"{path}: episode {episode_index} has {len(frames)} decodable frames, expected {n}")
+    return np.stack(frames)
+
+
+def reference_masks(config_dir: Path, episode_index: int) -> np.ndarray:
+    """The robot label masks of one episode (length, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers."""
+    from PIL import Image
+
+    ep = episodes(Path(config_dir))[episode_index]
+    lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
+    masks = []
+    for path in sorted(glob.glob(str(Path(config_dir) / "data" / "*" / "*.parquet"))):
+        t = pq.read_table(path, columns=["index", MASK_KEY], filters=[("index", ">=", lo), ("index", "<", hi)])
+        for cell in t.sort_by("index").column(MASK_KEY).to_pylist():
+            masks.append(np.asarray(Image.open(io.BytesIO(cell["bytes"])))[..., 0])
+    return np.stack(masks)

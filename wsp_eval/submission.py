@@ -1,0 +1,154 @@
+"""The submission contract (DESIGN "Submission layout") and its validate-only check.
+
+    <submission>/submission.json            model, benchmark_version, seeds [, configs, hardware, generation_seconds]
+    <submission>/<config>/<episode_id>/seed<k>.mp4
+
+`validate` lists every problem at once, each naming the file: missing or extra files, unreadable or
+truncated videos, zero frames, a frame count other than the reference horizon, constant videos, fps
+missing or absurd, links (a submission holds plain files only; a link pointing outside it is named as
+such), and a benchmark version that does not match the release. It never raises on bad input.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from wsp_data.schema import INSTANCES, RELEASE_JSON
+from wsp_eval.video import MAX_FPS, MIN_FPS, VideoError, read_video
+
+SUBMISSION_JSON = "submission.json"
+VIDEO_NAME = "seed{seed}.mp4"
+REQUIRED_KEYS = {"model": str, "benchmark_version": str, "seeds": list}
+TRAIN_PREFIX = "train_"
+
+
+@dataclass(frozen=True)
+class Problem:
+    path: str  # relative to the submission folder
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.path}: {self.message}"
+
+
+@dataclass(frozen=True)
+class Expected:
+    """One video the submission must hold."""
+
+    config: str
+    episode_id: str
+    seed: int
+    num_frames: int
+    fps: float
+
+    @property
+    def relpath(self) -> str:
+        return f"{self.config}/{self.episode_id}/{VIDEO_NAME.format(seed=self.seed)}"
+
+
+def test_configs(release: Path) -> list[str]:
+    """The scored configs of a release (training splits excluded)."""
+    rel = json.loads((Path(release) / RELEASE_JSON).read_text())
+    return sorted(c for c in rel["configs"] if not c.startswith(TRAIN_PREFIX))
+
+
+def expected_videos(release: Path, configs: list[str], seeds: list[int]) -> list[Expected]:
+    out = []
+    for config in configs:
+        table = pq.read_table(Path(release) / config / INSTANCES, columns=["episode_ids", "num_frames", "fps"])
+        for ids, frames, fps in zip(*(table.column(c).to_pylist() for c in ("episode_ids", "num_frames", "fps"))):
+            for episode_id, n in zip(ids, frames):
+                out.extend(Expected(config, episode_id, s, n, fps) for s in seeds)
+    return out
+
+
+def _read_manifest(sub: Path, release_version: str, release_configs: list[str]) -> tuple[dict | None, list[Problem]]:
+    path = sub / SUBMISSION_JSON
+    if not path.is_file():
+        return None, [Problem(SUBMISSION_JSON, "missing")]
+    try:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        return None, [Problem(SUBMISSION_JSON, f"not valid JSON ({e})")]
+    if not isinstance(meta, dict):
+        return None, [Problem(SUBMISSION_JSON, "must be a JSON object")]
+    problems = [Problem(SUBMISSION_JSON, f"'{k}' missing or not a {t.__name__}")
+                for k, t in REQUIRED_KEYS.items() if not isinstance(meta.get(k), t)]
+    seeds = meta.get("seeds")
+    if isinstance(seeds, list) and (not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds)
+                                    or len(set(seeds)) != len(seeds)):
+        problems.append(Problem(SUBMISSION_JSON, "'seeds' must be a non-empty list of distinct non-negative integers"))
+    version = meta.get("benchmark_version")
+    if isinstance(version, str) and version != release_version:
+        problems.append(Problem(SUBMISSION_JSON, f"benchmark_version {version!r} does not match the release "
+                                                 f"({release_version!r})"))
+    configs = meta.get("configs", release_configs)
+    if not isinstance(configs, list) or not configs:
+        problems.append(Problem(SUBMISSION_JSON, "'configs' must be a non-empty list when given"))
+    else:
+        unknown = [c for c in configs if c not in release_configs]
+        if unknown:
+            problems.append(Problem(SUBMISSION_JSON, f"configs not in the release: {', '.join(map(str, unknown))}"))
+    return (meta if not problems else None), problems
+
+
+def _links(sub: Path) -> list[Problem]:
+    problems = []
+    root = sub.resolve()
+    for p in sorted(sub.rglob("*")):
+        if p.is_symlink():
+            target = p.resolve()
+            where = "outside the submission" if root not in target.parents and target != root else "inside it"
+            problems.append(Problem(str(p.relative_to(sub)), f"is a link ({where}: {target}); submit plain files"))
+    return problems
+
+
+def check_video(path: Path, exp: Expected, rel: str) -> list[Problem]:
+    if path.stat().st_size == 0:
+        return [Problem(rel, "empty file (zero frames)")]
+    try:
+        frames, fps = read_video(path)
+    except VideoError as e:
+        return [Problem(rel, str(e).split(": ", 1)[-1])]
+    problems = []
+    if len(frames) == 0:
+        return [Problem(rel, "zero frames")]
+    if not np.isfinite(fps) or not MIN_FPS <= fps <= MAX_FPS:
+        problems.append(Problem(rel, f"fps missing or absurd ({fps}); expected {exp.fps:g}"))
+    if len(frames) != exp.num_frames:
+        problems.append(Problem(rel, f"{len(frames)} frames; the reference horizon is {exp.num_frames}"))
+    if len(frames) > 1 and (frames == frames[0]).all() and frames[0].min() == frames[0].max():
+        problems.append(Problem(rel, "constant video (every pixel of every frame has the same value)"))
+    return problems
+
+
+def validate(submission: Path, release: Path, *, check_videos: bool = True) -> list[Problem]:
+    """Every problem of a submission against a release (empty list: valid)."""
+    sub = Path(submission)
+    if not sub.is_dir():
+        return [Problem(str(sub), "submission folder not found")]
+    rel_meta = json.loads((Path(release) / RELEASE_JSON).read_text())
+    release_configs = test_configs(release)
+    meta, problems = _read_manifest(sub, rel_meta["version"], release_configs)
+    problems += _links(sub)
+    if meta is None:
+        return problems
+    expected = {e.relpath: e for e in expected_videos(release, meta.get("configs", release_configs), meta["seeds"])}
+    present = {str(p.relative_to(sub)) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
+    present.discard(SUBMISSION_JSON)
+    for rel in sorted(set(expected) - present):
+        problems.append(Problem(rel, "missing"))
+    for rel in sorted(present - set(expected)):
+        why = "unexpected file" if re.fullmatch(r"[\w.-]+/episode_\d{6}/seed\d+\.mp4", rel) is None else \
+            "unexpected video (no such episode or seed in the release)"
+        problems.append(Problem(rel, why))
+    if check_videos:
+        for rel in sorted(set(expected) & present):
+            problems += check_video(sub / rel, expected[rel], rel)
+    return problems
