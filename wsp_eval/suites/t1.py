@@ -1,0 +1,34 @@
+"""T1 Local action calibration score (SPEC §3 T1).
+
+For one generation seed: r = D(ĝ⁰, ĝˢ) / D(ĝ⁰, ĝˡ) with D the temporally aligned full-video MSE (the
+generated original is the timebase); r* = D⁰ˢ / D⁰ˡ from the simulator references (stored in the instance
+row). S = clip₀¹(r / r*) if r ≤ r*, else clip₀¹((1 − r) / (1 − r*)); S = 0 when D(ĝ⁰, ĝˡ) = 0. The instance
+score averages S over seeds; the suite score is 100 · mean over instances.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsp_eval.video import aligned_mse
+
+ROLES = ("original", "small", "large")
+
+
+def calibration(r: float, r_star: float) -> float:
+    s = r / r_star if r <= r_star else (1.0 - r) / (1.0 - r_star)
+    return float(np.clip(s, 0.0, 1.0))
+
+
+def seed_score(videos: dict[str, tuple[np.ndarray, float]], r_star: float) -> float:
+    """S for one seed; `videos` maps role → (frames, fps) of the generated rollouts."""
+    (g0, f0), (gs, fs), (gl, fl) = (videos[r] for r in ROLES)
+    d_ol = aligned_mse(g0, gl, f0, fl)
+    if d_ol == 0:
+        return 0.0
+    return calibration(aligned_mse(g0, gs, f0, fs) / d_ol, r_star)
+
+
+def instance_score(per_seed: list[dict[str, tuple[np.ndarray, float]]], r_star: float) -> float:
+    """Seeds are averaged per instance before anything else."""
+    return float(np.mean([seed_score(v, r_star) for v in per_seed]))
