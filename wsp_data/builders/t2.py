@@ -1,0 +1,189 @@
+"""T2 Global trajectory coverage (SPEC §3 T2): a receiver scene + the complete action stream of another task.
+
+Proposal: the slot's receiver task and scene seed; a donor task drawn by the proposal RNG among the config's
+other tasks that start in the receiver's arm configuration (`compatible_donors`); the donor stream is the
+verified expert trajectory of the donor task at `donor_seed = seed + DONOR_SEED_OFFSET` (a seed of its own,
+so the donor scene is not laid out by the receiver's random numbers).
+Validation: the whole stream is executed from the receiver's reset state without rendering first
+(`replay_problem`: the common checks of SPEC §5 plus two kinds of unintended collision), then rendered, and
+kept only if RMFA can score it: at least one window with active robot pixels (`wsp_eval.flow`).
+Stored per instance: donor task and seed, the receiver–donor motion mismatch (`motion_mismatch`) and the
+number of scorable windows. Definitions and measurements: docs/t2.md.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.validity import MAX_JOINT_SPEED, check_rollout
+from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
+from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN
+from wsp_data.sources.experts import ExpertSource, task_spec
+from wsp_data.staging import RolloutArrays
+from wsp_eval.flow import active_pixels_per_window, reference_flows
+
+ARM = 7  # arm joints; the gripper (action dim 7) is not arm motion
+TYPICAL_TRAJECTORIES = 8  # expert trajectories averaged into a task's typical arm stream
+TYPICAL_MAX_SEEDS = 24  # training seeds tried to find them
+MISMATCH_POINTS = 50  # time-normalised samples per stream
+DONOR_SEED_OFFSET = SEED_SPAN // 2  # donor seeds live in the upper half of the T2 seed range
+START_GAP = MAX_JOINT_SPEED / FPS  # rad: the largest first-step jump the instability check allows (0.5)
+BLOCK_RAD = 0.15  # rad an arm joint may lag its target …
+BLOCK_STEPS = 10  # … for this many consecutive steps (0.5 s) before the arm counts as blocked
+FLUNG_SPEED = 1.0  # m/s: horizontal speed of a task object that counts as flung
+
+
+# -- motion mismatch -------------------------------------------------------------------------------------
+def time_normalised(actions: np.ndarray, points: int = MISMATCH_POINTS) -> np.ndarray:
+    """The 7 arm-joint targets of a (T, 8) stream, linearly resampled at `points` evenly spaced instants of
+    normalised time [0, 1] (first and last action kept): (points, 7)."""
+    arm = np.asarray(actions, dtype=np.float64)[:, :ARM]
+    if len(arm) < 2:
+        raise ValueError("a stream needs at least two actions to be time-normalised")
+    src, dst = np.linspace(0.0, 1.0, len(arm)), np.linspace(0.0, 1.0, points)
+    return np.stack([np.interp(dst, src, arm[:, j]) for j in range(ARM)], axis=1)
+
+
+def typical_arm_stream(source: ExpertSource, count: int = TYPICAL_TRAJECTORIES) -> np.ndarray:
+    """Mean of the time-normalised arm streams of a task's first `count` verified expert trajectories on
+    training seeds SEED_BASE["train"], +1, … (never test seeds): (MISMATCH_POINTS, 7)."""
+    streams = []
+    for seed in range(SEED_BASE["train"], SEED_BASE["train"] + TYPICAL_MAX_SEEDS):
+        if (a := source.trajectory(seed)) is not None:
+            streams.append(time_normalised(a))
+            if len(streams) == count:
+                return np.mean(streams, axis=0)
+    raise RuntimeError(f"{source.spec.name}: only {len(streams)} of the {count} expert trajectories needed for "
+                       f"the typical arm stream succeeded on training seeds {SEED_BASE['train']}–"
+                       f"{SEED_BASE['train'] + TYPICAL_MAX_SEEDS - 1}")
+
+
+def motion_mismatch(donor_actions: np.ndarray, typical: np.ndarray) -> float:
+    """RMS (rad) over time-normalised samples and the 7 arm joints of donor stream − receiver's typical."""
+    return float(np.sqrt(np.mean((time_normalised(donor_actions, len(typical)) - typical) ** 2)))
+
+
+# -- validity ----------------------------------------------------------------------------------------------
+def arm_blocked(qpos: np.ndarray, actions: np.ndarray) -> bool:
+    """The arm is held back by something it collides with (table, a fixed fixture, a pinned object): some arm
+    joint lags its target by more than BLOCK_RAD for BLOCK_STEPS consecutive steps. `qpos` (T+1, 9)."""
+    lag = np.abs(qpos[1:, :ARM] - actions[:, :ARM]).max(axis=1)
+    return len(lag) >= BLOCK_STEPS and bool((sliding_window_view(lag, BLOCK_STEPS).min(axis=1) > BLOCK_RAD).any())
+
+
+def object_flung(object_poses: np.ndarray) -> bool:
+    """A task object is struck so hard that it moves faster than FLUNG_SPEED horizontally between frames.
+    `object_poses` (T+1, K, 7), NaN-padded."""
+    used = ~np.isnan(object_poses[0, :, 0])
+    xy = object_poses[:, used, :2]
+    return len(xy) > 1 and bool((np.linalg.norm(np.diff(xy, axis=0), axis=-1) * FPS > FLUNG_SPEED).any())
+
+
+def replay_problem(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarray, actions: np.ndarray,
+                   qlimits: np.ndarray) -> str | None:
+    """None for a valid donor replay, else the drop reason: a common check (`check_rollout`), `arm_blocked`
+    or `object_flung` (unintended collisions)."""
+    if (why := check_rollout(qpos, tcp_pose, object_poses, actions, qlimits)) is not None:
+        return why
+    if arm_blocked(qpos, actions):
+        return "arm_blocked"
+    if object_flung(object_poses):
+        return "object_flung"
+    return None
+
+
+# -- builder -----------------------------------------------------------------------------------------------
+class _TaskRig:
+    """One task in one worker: its expert source (donor streams, state-only replays), typical arm stream and
+    a rendering env created when the task is first a receiver."""
+
+    def __init__(self, task: str):
+        self.spec = task_spec(task)
+        self.expert = ExpertSource(task)
+        self.state = self.expert.replayer
+        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+        self.typical = typical_arm_stream(self.expert)
+        self._render: ManiSkillPlatform | None = None
+
+    @property
+    def render(self) -> ManiSkillPlatform:
+        if self._render is None:
+            self._render = ManiSkillPlatform(self.spec.name, render=True, objects=self.spec.objects)
+        return self._render
+
+    def close(self) -> None:
+        self.expert.close()
+        if self._render is not None:
+            self._render.close()
+
+    def invalid(self, ro: Rollout) -> str | None:
+        return replay_problem(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
+                              self.qlimits)
+
+
+class T2Builder(SuiteBuilder):
+    suite = "t2"
+    title = "T2 Global trajectory coverage"
+    description = ("Cross-task replays: the complete expert action stream of a donor task, executed from the receiver "
+                   "scene's initial state. Kept when the replay is executable and valid (joint limits, no instability, "
+                   "the arm never blocked, no object flung) and has robot motion RMFA can score. Columns `donor_task`, "
+                   "`donor_seed`, `mismatch` (RMS rad between the donor's time-normalised arm stream and the receiver "
+                   "task's typical one; cut into deciles at scoring) and `active_windows`. Score: RMFA.")
+    roles = ("reference",)
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        if len(set(config.tasks)) < 2:
+            raise ValueError("T2 needs at least two tasks: the donor task must differ from the receiver")
+        if MAX_ATTEMPTS * config.count > DONOR_SEED_OFFSET:
+            raise ValueError(f"T2 supports at most {DONOR_SEED_OFFSET // MAX_ATTEMPTS} instances per config: receiver "
+                             f"scene seeds must stay below the donor seeds (offset {DONOR_SEED_OFFSET})")
+        self._rigs: dict[str, _TaskRig] = {}
+
+    def rig(self, task: str) -> _TaskRig:
+        if task not in self._rigs:
+            self._rigs[task] = _TaskRig(task)
+        return self._rigs[task]
+
+    def close(self) -> None:
+        for r in self._rigs.values():
+            r.close()
+        self._rigs.clear()
+
+    def compatible_donors(self, receiver: str) -> list[str]:
+        """The config's other tasks whose typical stream starts within START_GAP (every arm joint) of the
+        receiver's: a donor from another start (e.g. the wrist turned by π/2) would jerk the arm in step one."""
+        start = self.rig(receiver).typical[0]
+        return [t for t in dict.fromkeys(self.config.tasks)
+                if t != receiver and np.abs(self.rig(t).typical[0] - start).max() <= START_GAP]
+
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        receiver = self.rig(plan.task)
+        donors = self.compatible_donors(plan.task)
+        if not donors:
+            return Dropped("no_compatible_donor")
+        donor_task = donors[int(rng.integers(len(donors)))]
+        donor_seed = seed + DONOR_SEED_OFFSET
+        stream = self.rig(donor_task).expert.trajectory(donor_seed)
+        if stream is None:
+            return Dropped("donor_source_failed", detail={"donor_task": donor_task})
+        simulated = len(stream)
+        if (why := receiver.invalid(receiver.state.replay(seed, stream))) is not None:
+            return Dropped(why, simulated_steps=simulated, detail={"donor_task": donor_task})
+        ro = receiver.render.replay(seed, stream)
+        steps = len(stream)
+        if (why := receiver.invalid(ro)) is not None:
+            return Dropped(why, steps, simulated, {"donor_task": donor_task})
+        active = active_pixels_per_window(*reference_flows(ro.stack("rgb"), ro.stack("mask"), FPS))
+        if not (active > 0).any():
+            return Dropped("no_scorable_motion", steps, simulated, {"donor_task": donor_task})
+        row = {
+            "task": plan.task, "seed": seed, "instruction": receiver.spec.instruction,
+            "objects": list(receiver.spec.objects), "source": f"scripted_expert (donor: {donor_task})",
+            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical),
+            "active_windows": int((active > 0).sum()), "num_windows": len(active),
+            "interventions": {"reference": {"donor_task": donor_task, "donor_seed": donor_seed}},
+        }
+        return Kept(row, [RolloutArrays.from_rollout("reference", ro)], steps, simulated)

@@ -1,0 +1,163 @@
+"""Robot-Masked Flow Alignment (RMFA, SPEC §4): flows, windows, active sets and scores; no simulator.
+
+Pipeline for one video (reference or generated) over a duration T (the common duration of the pair):
+1. Sample at `EVAL_FPS` = 5 Hz: times t_k = k / 5 for every k with t_k ≤ T (t_0 = 0), each taking the
+   nearest frame by timestamp (`wsp_eval.video`). A video of n frames at `fps` lasts (n − 1) / fps.
+2. Resize to `FLOW_SIZE` = 160×120 (RGB bilinear, then grey; label masks nearest-neighbour).
+3. Flow k = OpenCV DIS (preset MEDIUM, one thread) from sample k to sample k + 1: K = len(samples) − 1
+   fields, each (120, 160, 2) in pixels of the 160×120 grid. The reference's robot mask of flow k is the
+   union of the robot masks (label > 0) at samples k and k + 1.
+4. Windows (`windows`): 2 s long, 1 s stride = `WINDOW_FLOWS` = 10 consecutive flows starting every
+   `STRIDE_FLOWS` = 5 flows, as long as a full window fits. If flows remain after the last full window
+   (a final partial window), one more full window ending at the last flow is added, so every flow is
+   covered and every window still has 10 flows. A clip with 1–9 flows (0.2 s ≤ T < 2 s) has one window
+   holding all its flows; a clip with no flow (T < 0.2 s) has none.
+5. Active set of a window: M = {(k, p) : k in the window, mask_k(p), ‖F*_k(p)‖ > τ}, τ = 0.25 px.
+   S_w = 100·max(0, 1 − E / max(R, c)), E = RMS over M of ‖F̂ − F*‖, R = RMS over M of ‖F*‖, c = 3.16 px.
+   A window with empty M is skipped; the instance score is the mean over the other windows (None when
+   there is none — builders reject such references, so a release never holds one).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from wsp_eval.video import nearest_indices, timestamps
+
+EVAL_FPS = 5.0  # Hz: the RMFA timebase (flows span 0.2 s)
+FLOW_SIZE = (160, 120)  # (width, height) of the flow grid
+WINDOW_FLOWS = 10  # flows per window (2 s at 5 Hz)
+STRIDE_FLOWS = 5  # window stride in flows (1 s at 5 Hz)
+TAU = 0.25  # px: reference flow magnitude above which a robot pixel is active
+C = 3.16  # px: floor of the normaliser R (limits sensitivity to low-motion flow noise)
+DIS_PRESET = cv2.DISOPTICAL_FLOW_PRESET_MEDIUM
+
+
+class ReferenceFlows(NamedTuple):
+    """The reference side of RMFA: K flow fields and the robot mask of each flow pair."""
+
+    flows: np.ndarray  # (K, 120, 160, 2) float32, px on the 160×120 grid
+    masks: np.ndarray  # (K, 120, 160) bool: robot at either end of the pair
+
+
+def clip_duration(num_frames: int, fps: float) -> float:
+    """Seconds from the first to the last frame (frame j sits at j / fps)."""
+    if num_frames < 1:
+        raise ValueError("a video needs at least one frame")
+    return float(timestamps(num_frames, fps)[-1])
+
+
+def sample_times(duration: float) -> np.ndarray:
+    """The 5 Hz evaluation grid t_k = k / 5 with 0 ≤ t_k ≤ duration."""
+    if duration < 0:
+        raise ValueError(f"duration must be non-negative, got {duration}")
+    return np.arange(int(np.floor(duration * EVAL_FPS + 1e-9)) + 1) / EVAL_FPS
+
+
+def _sample_indices(num_frames: int, fps: float, duration: float | None) -> np.ndarray:
+    """Frame index nearest to each 5 Hz sample time (duration defaults to the whole clip)."""
+    own = clip_duration(num_frames, fps)
+    if duration is None:
+        duration = own
+    if duration > own + 1e-9:
+        raise ValueError(f"duration {duration:.3f} s exceeds the clip's {own:.3f} s")
+    times = sample_times(duration)
+    if num_frames == 1:
+        return np.zeros(len(times), dtype=int)
+    return nearest_indices(timestamps(num_frames, fps), times)
+
+
+def _grey_grid(frames: np.ndarray) -> np.ndarray:
+    if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[-1] != 3:
+        raise ValueError(f"expected (T, H, W, 3) uint8 RGB frames, got {frames.dtype} {frames.shape}")
+    return np.stack([cv2.cvtColor(cv2.resize(f, FLOW_SIZE, interpolation=cv2.INTER_LINEAR), cv2.COLOR_RGB2GRAY)
+                     for f in frames])
+
+
+def _robot_grid(labels: np.ndarray) -> np.ndarray:
+    if labels.ndim != 3 or not np.issubdtype(labels.dtype, np.integer):
+        raise ValueError(f"expected (T, H, W) integer robot labels (0 not robot, 1/2 robot), got "
+                         f"{labels.dtype} {labels.shape}")
+    robot = (labels > 0).astype(np.uint8)
+    return np.stack([cv2.resize(m, FLOW_SIZE, interpolation=cv2.INTER_NEAREST) for m in robot]).astype(bool)
+
+
+def _dis_flows(grey: np.ndarray) -> np.ndarray:
+    cv2.setNumThreads(1)
+    dis = cv2.DISOpticalFlow_create(DIS_PRESET)
+    out = np.zeros((max(len(grey) - 1, 0), FLOW_SIZE[1], FLOW_SIZE[0], 2), dtype=np.float32)
+    for k in range(len(out)):
+        out[k] = dis.calc(grey[k], grey[k + 1], None)
+    return out
+
+
+def video_flows(video: np.ndarray, fps: float, duration: float | None = None) -> np.ndarray:
+    """(K, 120, 160, 2) DIS flows of a (T, H, W, 3) uint8 RGB video sampled at 5 Hz over `duration`
+    seconds (default: the whole clip). Used for both the reference and a generated video."""
+    idx = _sample_indices(len(video), fps, duration)
+    return _dis_flows(_grey_grid(np.asarray(video)[idx]))
+
+
+def reference_flows(video: np.ndarray, labels: np.ndarray, fps: float, duration: float | None = None
+                    ) -> ReferenceFlows:
+    """Reference flows and per-pair robot masks. `labels`: (T, H, W) integer masks aligned with `video`
+    (0 not robot, 1 arm, 2 wrist/hand/fingers; robot = label > 0)."""
+    if len(labels) != len(video):
+        raise ValueError(f"{len(labels)} masks for {len(video)} frames")
+    idx = _sample_indices(len(video), fps, duration)
+    robot = _robot_grid(np.asarray(labels)[idx])
+    return ReferenceFlows(_dis_flows(_grey_grid(np.asarray(video)[idx])), robot[:-1] | robot[1:])
+
+
+def windows(num_flows: int) -> list[tuple[int, int]]:
+    """Half-open flow-index ranges [start, end) of the RMFA windows (module docstring, step 4)."""
+    if num_flows < 0:
+        raise ValueError(f"num_flows must be non-negative, got {num_flows}")
+    if num_flows == 0:
+        return []
+    if num_flows <= WINDOW_FLOWS:
+        return [(0, num_flows)]
+    out = [(s, s + WINDOW_FLOWS) for s in range(0, num_flows - WINDOW_FLOWS + 1, STRIDE_FLOWS)]
+    if out[-1][1] < num_flows:
+        out.append((num_flows - WINDOW_FLOWS, num_flows))
+    return out
+
+
+def _active(flows: np.ndarray, masks: np.ndarray, tau: float) -> np.ndarray:
+    if flows.shape[:-1] != masks.shape or flows.shape[-1] != 2:
+        raise ValueError(f"flows {flows.shape} and masks {masks.shape} do not match")
+    return masks & (np.linalg.norm(flows, axis=-1) > tau)
+
+
+def active_pixels_per_window(flows: np.ndarray, masks: np.ndarray, tau: float = TAU) -> np.ndarray:
+    """|M| of every window: robot-mask pixels whose reference flow exceeds τ, summed over its flows."""
+    active = _active(flows, masks, tau)
+    return np.array([int(active[s:e].sum()) for s, e in windows(len(flows))], dtype=np.int64)
+
+
+def rmfa_window_score(f_hat: np.ndarray, f_star: np.ndarray, mask: np.ndarray, tau: float = TAU,
+                      c: float = C) -> float | None:
+    """S_w for one window's flows (k, H, W, 2) and masks (k, H, W); None when M is empty."""
+    if f_hat.shape != f_star.shape:
+        raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ")
+    m = _active(f_star, mask, tau)
+    if not m.any():
+        return None
+    e = float(np.sqrt(np.mean(np.sum((f_hat[m] - f_star[m]) ** 2, axis=-1))))
+    r = float(np.sqrt(np.mean(np.sum(f_star[m] ** 2, axis=-1))))
+    return 100.0 * max(0.0, 1.0 - e / max(r, c))
+
+
+def rmfa_score(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
+               ) -> float | None:
+    """Instance RMFA: mean S_w over the windows with non-empty M; None when no window is scorable.
+    Both flow sequences must cover the same common duration (same K)."""
+    if f_hat.shape != f_star.shape:
+        raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ: sample both "
+                         "over their common duration")
+    scores = [s for a, b in windows(len(f_star))
+              if (s := rmfa_window_score(f_hat[a:b], f_star[a:b], masks[a:b], tau, c)) is not None]
+    return float(np.mean(scores)) if scores else None
