@@ -99,17 +99,30 @@ def pick(s: SkillScript, actor: str, lift: float = 0.08, closing=None) -> sapien
     return g
 
 
-def place_object(s: SkillScript, actor: str, p, yaw: float | None = None, clearance: float = 0.04,
-                 period: float = np.pi / 2) -> None:
-    """Carry the grasped `actor` so that its origin lands on `p` (its yaw, modulo `period`, on `yaw`),
-    using the actual hand-to-object transform; release and back off."""
+def place_object(s: SkillScript, actor: str, p, turn: float = 0.0, clearance: float = 0.04) -> None:
+    """Carry the grasped `actor` so that its origin lands on `p`, turned by `turn` about the vertical, using
+    the actual hand-to-object transform; release and back off."""
     obj = s.pose(actor)
     hand_to_obj = s.tcp.inv() * obj
-    q = obj.q
-    if yaw is not None:
-        q = rotated(obj, [0, 0, 1], _wrap(yaw - _yaw(obj), period)).q
-    tcp = sapien.Pose(np.asarray(p, dtype=np.float64), q) * hand_to_obj.inv()
+    tcp = sapien.Pose(np.asarray(p, dtype=np.float64), rotated(obj, [0, 0, 1], turn).q) * hand_to_obj.inv()
     s.place(tcp, clearance=clearance)
+
+
+def clear_closing(s: SkillScript, actor: str, others: tuple[str, ...], prefer, near: float = 0.09) -> np.ndarray:
+    """A finger-closing direction for a top grasp on `actor`: across the direction to the nearest of `others`
+    when that one is closer than `near` (so no finger comes down on it), else `prefer`."""
+    p = s.pose(actor).p
+    d = min((s.pose(o).p - p for o in others), key=lambda v: np.linalg.norm(v[:2])) * [1, 1, 0]
+    if np.linalg.norm(d) < near:
+        return np.array([-d[1], d[0], 0.0]) / np.linalg.norm(d)
+    return np.asarray(prefer, dtype=np.float64)
+
+
+def turn_closing_to(s: SkillScript, direction) -> float:
+    """The smallest turn about the vertical (modulo the gripper's 180° symmetry) that brings the fingers'
+    closing axis onto `direction`."""
+    c = _axis(s.tcp, 1)
+    return _wrap(np.arctan2(direction[1], direction[0]) - np.arctan2(c[1], c[0]), np.pi)
 
 
 def _pose(x) -> sapien.Pose:
@@ -188,7 +201,8 @@ def solve_place_sphere(s: SkillScript) -> None:
 def solve_lift_peg_upright(s: SkillScript) -> None:
     # Grasp the peg near its robot-side end, carry it closer to the base, then pitch the hand by ~90° about
     # the closing axis so the peg hangs straight down (fingers end up pointing back at the robot: the other
-    # way round exceeds joint 6's range), stand it on the table and let go.
+    # way round exceeds joint 6's range; 87° rather than 90° keeps the pd_ee_pose Euler command off its
+    # singularity, gravity settles the rest), stand it on the table and let go.
     peg = s.pose("peg")
     axis = _axis(peg, 0)
     axis = axis if axis[0] >= 0 else -axis
@@ -221,8 +235,9 @@ def solve_poke_cube(s: SkillScript) -> None:
 
 
 def solve_stack_pyramid(s: SkillScript) -> None:
-    # Put cube A beside cube B (yaw aligned, on B's free face nearest to A), then cube C across both. Fingers
-    # close across the A–B line so that they never come down between or onto the two cubes.
+    # Put cube A beside cube B (yaw aligned, on B's free face nearest to A), then cube C across both. Cubes
+    # are picked with the fingers clear of close neighbours, and turned in the air so that the fingers close
+    # across the A–B line: they never come down between or onto the two cubes.
     half = float(np.asarray(s.u.cube_half_size).reshape(-1)[0])
     a, b, c = s.pose("cubeA"), s.pose("cubeB"), s.pose("cubeC")
     sides = [b * sapien.Pose(d) for d in ([2.5 * half, 0, 0], [-2.5 * half, 0, 0], [0, 2.5 * half, 0],
@@ -231,13 +246,13 @@ def solve_stack_pyramid(s: SkillScript) -> None:
     spot = min(sides, key=lambda p: np.linalg.norm(p.p[:2] - a.p[:2])).p
     line = (spot - b.p) / np.linalg.norm(spot - b.p)
     across = np.array([-line[1], line[0], 0.0])
-    turn = _wrap(_yaw(b) - _yaw(a), np.pi / 2)  # the carry turns A by this much
-    pick(s, "cubeA", closing=_turn_z(across, -turn))
-    place_object(s, "cubeA", spot + [0, 0, 0.003], yaw=_yaw(b))
+    turn = _wrap(_yaw(b) - _yaw(a), np.pi / 2)  # the smallest turn that aligns A with B
+    pick(s, "cubeA", closing=clear_closing(s, "cubeA", ("cubeB", "cubeC"), _turn_z(across, -turn)))
+    place_object(s, "cubeA", spot + [0, 0, 0.003], turn=turn_closing_to(s, across))
     a = s.pose("cubeA")
     turn = _wrap(_yaw(b) - _yaw(c), np.pi / 2)
-    pick(s, "cubeC", closing=_turn_z(across, -turn))
-    place_object(s, "cubeC", (a.p + b.p) / 2 + [0, 0, 2 * half + 0.003], yaw=_yaw(b))
+    pick(s, "cubeC", closing=clear_closing(s, "cubeC", ("cubeA", "cubeB"), _turn_z(across, -turn)))
+    place_object(s, "cubeC", (a.p + b.p) / 2 + [0, 0, 2 * half + 0.003], turn=turn_closing_to(s, across))
     s.hold(6)
 
 
@@ -265,12 +280,13 @@ def solve_pull_cube_tool(s: SkillScript) -> None:
     # lift it, lower the hook just beyond the cube (the cube between handle and hook tip), then draw the tool
     # back towards the base so the hook drags the cube along.
     u = s.u
-    tool, cube = s.pose("l_shape_tool"), s.pose("cube")
+    tool = s.pose("l_shape_tool")
     g = top_grasp(s, "l_shape_tool")
     g = rotated(g, [0, 1, 0], -TOOL_LEAN)  # the handle lies along x: pitch the fingers forward about y
     grip_x = 0.06
     s.grasp(sapien.Pose((tool * sapien.Pose([grip_x, 0, 0])).p, g.q))
     s.lift(0.08)
+    cube = s.pose("cube")  # read now: a cube spawned against the hook is pushed out on the first steps
     hook_face = float(u.handle_length - u.hook_length)
     origin = cube.p + [float(u.cube_half_size) + 0.012 - hook_face, -1.3 * float(u.width), 0]
     tcp = sapien.Pose(origin + [grip_x, 0, s._target.p[2]], g.q)
@@ -305,6 +321,7 @@ def solve_plug_charger(s: SkillScript) -> None:
                                      depth=FINGER_LENGTH)
     g = u.agent.build_grasp_pose(np.array([0, 0, -1]), info["closing"], info["center"])
     g = g * sapien.Pose(q=[np.cos(np.pi / 24), 0, np.sin(np.pi / 24), 0])
+    s.move(sapien.Pose([*g.p[:2], max(s._target.p[2], 0.2)], g.q))  # over the receptacle, not through it
     s.grasp(g, clearance=0.05)
     s.lift(0.06)
     insert_held(s, "charger", _pose(u.goal_pose), standoff=0.05, speed=0.2)

@@ -19,14 +19,15 @@ from tqdm import tqdm
 
 from wsp_data.sources.experts import TASKS, ExpertSource, task_spec
 
-COLUMNS = ("task", "seeds", "successes", "success rate", "mean length (steps)", "s / trajectory")
+COLUMNS = ("task", "seeds", "successes", "success rate", "mean length (steps)", "max length", "s / trajectory")
 
 
 def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True) -> list[dict]:
     """Script and verify every seed of every task; one summary row per task.
 
-    Row keys: `task`, `seeds` (tried), `successes`, `success_rate`, `mean_length` (steps of the verified
-    trajectories, None if there are none) and `seconds_per_trajectory` (wall time of script + replay per seed).
+    Row keys: `task`, `seeds` (tried), `successes`, `success_rate`, `mean_length` and `max_length` (steps of
+    the verified trajectories, None if there are none) and `seconds_per_trajectory` (wall time of script +
+    replay, per seed tried).
     """
     seeds = list(seeds)
     for name in tasks:
@@ -52,6 +53,7 @@ def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True)
             rows.append(dict(
                 task=name, seeds=n, successes=len(lengths), success_rate=len(lengths) / n if n else 0.0,
                 mean_length=sum(lengths) / len(lengths) if lengths else None,
+                max_length=max(lengths) if lengths else None,
                 seconds_per_trajectory=seconds / n if n else 0.0,
             ))
     return rows
@@ -61,9 +63,9 @@ def markdown(rows: Sequence[dict]) -> str:
     """The survey rows as a Markdown table."""
     lines = ["| " + " | ".join(COLUMNS) + " |", "|" + "|".join(["---"] + ["---:"] * (len(COLUMNS) - 1)) + "|"]
     for r in rows:
-        length = "–" if r["mean_length"] is None else f"{r['mean_length']:.0f}"
+        mean, top = ("–", "–") if r["mean_length"] is None else (f"{r['mean_length']:.0f}", str(r["max_length"]))
         lines.append(f"| {r['task']} | {r['seeds']} | {r['successes']} | {100 * r['success_rate']:.0f}% | "
-                     f"{length} | {r['seconds_per_trajectory']:.2f} |")
+                     f"{mean} | {top} | {r['seconds_per_trajectory']:.2f} |")
     return "\n".join(lines) + "\n"
 
 
