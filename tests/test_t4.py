@@ -1,0 +1,181 @@
+"""A real tiny T4 build (ManiSkill PickCube, 2 instances per kind): both loaders, and every kind's acceptance
+rule re-checked from the stored states with this file's own thresholds (SPEC §3 T4, docs/t4.md), not the
+builder's code. The reference must also score 100 when the stored video is tracked like a submission."""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from wsp_data.schema import INSTANCES, MASK_KEY, VIDEO_KEY
+
+KINDS = ("distractor", "false_contact", "spatial_proximity")
+STILL_M, STILL_RAD = 0.005, 0.05  # an object that stays put
+OPEN_M = 0.035  # each Panda finger joint is 0.04 m fully open
+SWEPT_M, LOW_Z = 0.10, 0.12  # spatial proximity: target ≥ 0.10 m from wherever the TCP went below 0.12 m
+CLEAR_M = 0.04  # distractor centre ≥ 4 cm from every task object's centre (2 cm half sizes + 2 cm clearance)
+
+
+@pytest.fixture(scope="module")
+def release(tmp_path_factory):
+    from wsp_data.build import build
+    from wsp_data.builders import BuildConfig
+
+    out = tmp_path_factory.mktemp("t4") / "worldsimprobe"
+    config = BuildConfig(suite="t4", platform="maniskill", count=6, tasks=("PickCube",), seed=0, max_attempts=8)
+    result = build(config, out, progress=False)
+    assert result.assembled
+    return out
+
+
+@pytest.fixture(scope="module")
+def rows(release):
+    from datasets import load_dataset
+
+    return load_dataset(str(release), "t4_maniskill", split="test")
+
+
+@pytest.fixture(scope="module")
+def ds(release):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    return LeRobotDataset("worldsimprobe/t4_maniskill", root=release / "t4_maniskill")
+
+
+@pytest.fixture(scope="module")
+def episodes(ds, rows):
+    """Per instance: its stored per-frame states as numpy arrays (one reference episode each)."""
+    out = []
+    for r in rows:
+        (idx,) = r["episode_indices"]
+        ep = ds.meta.episodes[idx]
+        table = ds.hf_dataset.select(range(ep["dataset_from_index"], ep["dataset_to_index"]))
+        cols = {k: np.stack([np.asarray(v, np.float64) for v in table[k]]) for k in
+                ("observation.object_poses", "observation.contacts", "observation.state", "observation.ee_pose",
+                 "action", "next.success")}
+        out.append({"poses": cols["observation.object_poses"].reshape(len(table), -1, 7),
+                    "contacts": cols["observation.contacts"].astype(bool), "qpos": cols["observation.state"],
+                    "tcp": cols["observation.ee_pose"], "action": cols["action"],
+                    "success": cols["next.success"].astype(bool).reshape(-1), "episode": ep})
+    return out
+
+
+def still(poses: np.ndarray) -> bool:
+    dp = np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1)
+    dq = 2 * np.arccos(np.clip(np.abs(poses[:, 3:] @ poses[0, 3:]), 0, 1))
+    return bool(dp.max() < STILL_M and dq.max() < STILL_RAD)
+
+
+def test_every_kind_appears_balanced(rows, release):
+    report = json.loads((release / "t4_maniskill" / "build_report.json").read_text())
+    counts = Counter(rows["kind"])
+    assert set(counts) == set(KINDS) and max(counts.values()) <= 2
+    assert rows["kind"] == rows["group"]
+    assert set(report["per_group"]) == set(KINDS)
+    assert pq.read_table(release / "t4_maniskill" / INSTANCES).num_rows == len(rows) == report["kept"]
+
+
+def test_rows_hold_the_scoring_fields(rows):
+    for r in rows:
+        assert r["roles"] == ["reference"] and len(r["episode_indices"]) == 1
+        assert r["objects"][r["evaluated_object_index"]] == r["evaluated_object"]
+        assert len(r["object_pixel_256"]) == 2 and all(0 <= v < 256 for v in r["object_pixel_256"])
+        assert r["gate_reference"] >= 20.0
+        assert json.loads(r["interventions"])["reference"]["kind"] == r["kind"]
+        if r["kind"] == "distractor":
+            assert r["evaluated_object"].startswith("distractor_")
+        else:
+            assert r["evaluated_object"] == "cube"  # PickCube's target
+
+
+def test_evaluated_object_never_moves_nor_is_touched(rows, episodes):
+    for r, e in zip(rows, episodes):
+        k = r["evaluated_object_index"]
+        assert still(e["poses"][:, k]), r["instance_id"]
+        assert not e["contacts"][:, k].any(), r["instance_id"]
+
+
+def test_distractor_rule(rows, episodes):
+    """Inserted object (listed last, beside the task's own), clear of the task objects, task still succeeds."""
+    for r, e in zip(rows, episodes):
+        if r["kind"] != "distractor":
+            continue
+        k = r["evaluated_object_index"]
+        assert k == len(r["objects"]) - 1 and r["objects"][:k] == ["cube"]
+        assert e["success"][-1]
+        d0 = e["poses"][0, k, :2]
+        assert all(np.linalg.norm(e["poses"][0, j, :2] - d0) >= CLEAR_M for j in range(k))
+        iv = json.loads(r["interventions"])["reference"]
+        assert np.allclose(iv["pose"][:3], e["poses"][0, k, :3], atol=1e-3)  # placed where recorded, at rest
+        assert iv["donor_seed"] != r["seed"]
+
+
+def test_false_contact_rule(rows, episodes):
+    """Gripper commanded open throughout, fingers stay open, nothing is ever touched."""
+    for r, e in zip(rows, episodes):
+        if r["kind"] != "false_contact":
+            continue
+        assert (e["action"][:, 7] == 1.0).all()
+        assert (e["qpos"][:, 7:9] >= OPEN_M).all()
+        assert not e["contacts"].any()
+
+
+def test_spatial_proximity_rule(rows, episodes):
+    """Target moved from its spawn pose, far from everywhere the hand went low, never touched."""
+    for r, e in zip(rows, episodes):
+        if r["kind"] != "spatial_proximity":
+            continue
+        k = r["evaluated_object_index"]
+        iv = json.loads(r["interventions"])["reference"]
+        assert np.allclose(iv["to"][:3], e["poses"][0, k, :3], atol=1e-3)
+        assert np.linalg.norm(np.subtract(iv["from"][:2], iv["to"][:2])) > 0.05
+        low = e["tcp"][:, 2] < LOW_Z
+        assert low.any()  # the expert reached down to where the target was
+        assert np.linalg.norm(e["tcp"][low, :2] - e["poses"][0, k, :2], axis=1).min() >= SWEPT_M
+        assert not e["contacts"].any()
+
+
+def test_pixel_is_the_projection_of_the_stored_pose(rows, episodes):
+    """object_pixel_256 = the frame-0 centre through the stored intrinsics/extrinsics (128² camera), scaled
+    to 256² with pixel centres kept: x256 = 2·(x128 + 0.5) − 0.5."""
+    for r, e in zip(rows, episodes):
+        ep = e["episode"]
+        K = np.reshape(ep["wsp.camera_intrinsic"], (3, 3))
+        E = np.reshape(ep["wsp.camera_extrinsic"], (3, 4))
+        cam = E @ np.append(e["poses"][0, r["evaluated_object_index"], :3], 1.0)
+        uv = (K @ cam)[:2] / cam[2]
+        assert np.allclose(r["object_pixel_256"], 2 * (uv + 0.5) - 0.5, atol=1e-3)
+
+
+def test_stored_reference_scores_100_without_the_simulator(rows, ds):
+    """Tracking the decoded stored video (h264 crf 0) with the stored pixel, frame-0 mask and gate gives 100,
+    and the gate recomputed from the video matches the stored one."""
+    from wsp_eval.tracking import motion_gate, scoring_frames, t4_score
+
+    for r in rows:
+        ep = ds.meta.episodes[r["episode_indices"][0]]
+        frames = [ds[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
+        video = np.stack([(f[VIDEO_KEY].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) for f in frames])
+        mask0 = (frames[0][MASK_KEY][0].numpy() * 255).round().astype(np.uint8)
+        assert set(np.unique(mask0)) <= {0, 1, 2} and (mask0 == 2).any()
+        assert motion_gate(scoring_frames(video), mask0) == pytest.approx(r["gate_reference"], rel=0.1)
+        assert t4_score(video, np.array(r["object_pixel_256"]), mask0, r["gate_reference"]).score == 100.0
+
+
+def test_plan_balances_kinds_over_eligible_tasks():
+    from wsp_data.builders import BuildConfig
+    from wsp_data.builders.t4 import KIND_TASKS, T4Builder
+
+    tasks = ("PickCube", "PushCube", "StackCube")
+    b = T4Builder(BuildConfig(suite="t4", platform="maniskill", count=36, tasks=tasks))
+    plans = [b.plan(k) for k in range(36)]
+    assert Counter(p.group for p in plans) == {k: 12 for k in KINDS}
+    for kind in KINDS:
+        used = Counter(p.task for p in plans if p.group == kind)
+        assert set(used) == {t for t in tasks if t in KIND_TASKS[kind]} and len(set(used.values())) == 1
+    with pytest.raises(ValueError, match="false_contact"):
+        T4Builder(BuildConfig(suite="t4", platform="maniskill", count=3, tasks=("PushCube",)))

@@ -1,0 +1,210 @@
+"""The T4 tracker (wsp_eval.tracking) on hand-built videos with worked-out answers.
+
+Videos are drawn directly in the 256×256 scoring frame (unless a test checks resizing): a uniform grey
+background (no texture, so LK cannot lock onto it) and textured patches (smoothed noise) pasted at integer
+offsets, so the true motion of every patch is known exactly. Pyramidal LK localises a rigid textured patch
+to a few hundredths of a pixel (docs/TOOLCHAIN: 0.01–0.03 px); the tolerances below (0.5 px on shifts of
+6–50 px) leave room for sub-pixel bias at patch borders and are still far tighter than the 10 px decision.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from wsp_eval import tracking as tr
+
+S = tr.SCORING_SIZE
+BG = 100
+
+
+def texture(size: int, seed: int) -> np.ndarray:
+    noise = np.random.default_rng(seed).integers(0, 256, (size, size)).astype(np.float32)
+    return np.clip(cv2.GaussianBlur(noise, (0, 0), 1.2) * 2 - 128, 0, 255).astype(np.uint8)
+
+
+def canvas() -> np.ndarray:
+    return np.full((S, S), BG, np.uint8)
+
+
+def paste(img: np.ndarray, patch: np.ndarray, center: tuple[int, int]) -> None:
+    h = len(patch) // 2
+    x, y = center
+    img[y - h:y - h + len(patch), x - h:x - h + len(patch)] = patch
+
+
+def video(n: int, patches: list[tuple[np.ndarray, callable]]) -> np.ndarray:
+    """n frames; each patch is drawn (in order) at the integer centre its function gives for frame t."""
+    frames = []
+    for t in range(n):
+        img = canvas()
+        for patch, where in patches:
+            paste(img, patch, where(t))
+        frames.append(img)
+    return np.stack(frames)
+
+
+OBJ = texture(48, 1)  # the evaluated object: 48 px covers the query grid (radius 10) and its LK windows
+HAND = texture(40, 2)  # the "hand" that the motion gate follows
+OBJ_AT = (150, 170)
+HAND_FROM, HAND_TO = (60, 60), (90, 100)  # hand moves (30, 40): 50 px from the first to the last frame
+
+
+def hand_at(t: int, n: int) -> tuple[int, int]:
+    f = t / (n - 1)
+    return (round(HAND_FROM[0] + f * (HAND_TO[0] - HAND_FROM[0])), round(HAND_FROM[1] + f * (HAND_TO[1] - HAND_FROM[1])))
+
+
+def hand_mask() -> np.ndarray:
+    """Reference label mask at frame 0: label 2 (wrist/hand/fingers) on the hand patch, 1 on an 'arm' above."""
+    m = np.zeros((S, S), np.uint8)
+    m[HAND_FROM[1] - 20:HAND_FROM[1] + 20, HAND_FROM[0] - 20:HAND_FROM[0] + 20] = 2
+    m[:HAND_FROM[1] - 20, HAND_FROM[0] - 10:HAND_FROM[0] + 10] = 1
+    return m
+
+
+def scene(n: int, obj_at=lambda t: OBJ_AT, hand=True) -> np.ndarray:
+    patches = [(OBJ, obj_at)] + ([(HAND, lambda t: hand_at(t, n))] if hand else [])
+    return video(n, patches)
+
+
+# -- geometry -------------------------------------------------------------------------------------
+def test_projection_into_the_scoring_frame():
+    """Camera at the origin looking down +z, f = 64 px on a 128 px image: (0.5, −0.25, 1) m lands on
+    u = 64 + 32 = 96, v = 64 − 16 = 48 at 128²; scaling pixel centres by 2: (2·96 + 0.5, 2·48 + 0.5)."""
+    K = np.array([[64, 0, 64], [0, 64, 64], [0, 0, 1]], float)
+    E = np.hstack([np.eye(3), np.zeros((3, 1))])
+    assert tr.project([0.5, -0.25, 1.0], K, E, 128) == pytest.approx([192.5, 96.5])
+    assert tr.project([0, 0, 2.0], K, E, 128) == pytest.approx([128.5, 128.5])
+    with pytest.raises(ValueError, match="behind the camera"):
+        tr.project([0, 0, -1.0], K, E, 128)
+
+
+def test_query_grid_is_3x3_within_the_radius():
+    g = tr.query_grid(np.array([100.0, 50.0]))
+    assert g.shape == (9, 2)
+    r = np.linalg.norm(g - [100, 50], axis=1)
+    assert r.max() == pytest.approx(tr.QUERY_RADIUS, abs=1e-4) and r.min() == 0
+    assert len(np.unique(g[:, 0])) == 3 and len(np.unique(g[:, 1])) == 3
+
+
+def test_arm_grid_seeds_inside_the_eroded_distal_label():
+    m = hand_mask()
+    pts = tr.arm_grid(m)
+    x, y = pts[:, 0].astype(int), pts[:, 1].astype(int)
+    assert len(pts) == (40 - 2 * tr.ARM_ERODE) ** 2 // tr.ARM_GRID_STEP ** 2  # 36 / 4 = 9 per side → 81
+    assert (m[y, x] == 2).all()
+    assert tr.arm_grid(np.zeros((128, 128), np.uint8)).shape == (0, 2)
+
+
+def test_gate_frames_are_first_middle_last():
+    assert tr.gate_frames(5) == (0, 2, 4) and tr.gate_frames(4) == (0, 1, 3) and tr.gate_frames(1) == (0, 0, 0)
+
+
+# -- object displacement ----------------------------------------------------------------------------
+@pytest.mark.parametrize("shift", [(12, -5), (-6, 0), (25, 20)])
+def test_moved_patch_displacement_equals_the_shift(shift):
+    """The object slides linearly to `shift` px over 11 frames (≤ 2.5 px per frame): d = ‖shift‖."""
+    n = 11
+    frames = video(n, [(OBJ, lambda t: (OBJ_AT[0] + round(shift[0] * t / (n - 1)),
+                                        OBJ_AT[1] + round(shift[1] * t / (n - 1))))])
+    m = tr.object_motion(frames, np.array(OBJ_AT, float))
+    assert m.displacement == pytest.approx(np.hypot(*shift), abs=0.5)
+    assert m.textured_points == 9 and m.visible_fraction == 1.0
+
+
+def test_static_patch_has_no_displacement():
+    m = tr.object_motion(scene(20, hand=False), np.array(OBJ_AT, float))
+    assert m.displacement < 0.05 and m.visible_fraction == 1.0
+
+
+def test_returning_object_counts_its_farthest_excursion():
+    """d is the maximum over frames, not the final offset: out by 15 px and back scores d = 15."""
+    path = [0, 5, 10, 15, 10, 5, 0]
+    frames = video(len(path), [(OBJ, lambda t: (OBJ_AT[0] + path[t], OBJ_AT[1]))])
+    assert tr.object_motion(frames, np.array(OBJ_AT, float)).displacement == pytest.approx(15, abs=0.5)
+
+
+def test_occluder_passing_over_a_static_object_is_not_followed():
+    """A differently textured occluder sweeps across the static object (it overlaps the object's patch in
+    frames 3–11). Covered points must turn invisible instead of riding along, so d stays ≈ 0 while the
+    visible fraction drops."""
+    occluder = texture(40, 3)
+    n = 14
+    frames = video(n, [(OBJ, lambda t: OBJ_AT), (occluder, lambda t: (OBJ_AT[0] - 70 + 10 * t, OBJ_AT[1]))])
+    m = tr.object_motion(frames, np.array(OBJ_AT, float))
+    assert m.displacement < 0.5
+    assert m.visible_fraction < 1.0  # some frames had no visible point: the centroid was carried forward
+
+
+def test_textureless_object_is_tracked_by_its_edges_or_not_at_all():
+    """A uniform 60 px square: its inner query points have no texture in their 15 px windows and are never
+    visible; on a fully uniform frame no point is textured, so d = 0 by carrying the centroid forward."""
+    square = np.full((60, 60), 220, np.uint8)
+    frames = video(5, [(square, lambda t: OBJ_AT)])
+    assert tr.textured(frames[0], tr.query_grid(np.array(OBJ_AT, float))).sum() == 0
+    small = np.full((16, 16), 220, np.uint8)  # edges fall inside the windows: edge points are textured
+    assert tr.textured(video(1, [(small, lambda t: OBJ_AT)])[0], tr.query_grid(np.array(OBJ_AT, float))).sum() >= 4
+    m = tr.object_motion(frames, np.array(OBJ_AT, float))
+    assert m.textured_points == 0 and m.displacement == 0.0
+
+
+# -- motion gate -------------------------------------------------------------------------------------
+def test_gate_measures_the_hand_displacement():
+    """The hand moves (30, 40) px in a straight line: max pairwise distance of first/middle/last = 50."""
+    assert tr.motion_gate(scene(21), hand_mask()) == pytest.approx(50.0, abs=0.5)
+
+
+def test_frozen_and_armless_videos_fail_the_gate():
+    n = 21
+    moving = scene(n)
+    g_ref = tr.motion_gate(moving, hand_mask())
+    frozen = np.repeat(moving[:1], n, axis=0)
+    armless = scene(n, hand=False)
+    for frames in (frozen, armless):
+        s = tr.t4_score(frames, np.array(OBJ_AT, float), hand_mask(), g_ref)
+        assert s.gate == pytest.approx(0.0, abs=0.05) and not s.gate_passed and s.score == 0.0
+
+
+# -- the score ---------------------------------------------------------------------------------------
+def test_score_passes_a_faithful_video_and_fails_a_moved_object():
+    n = 21
+    mask = hand_mask()
+    g_ref = tr.motion_gate(scene(n), mask)
+    faithful = tr.t4_score(scene(n), np.array(OBJ_AT, float), mask, g_ref)
+    assert faithful.score == 100.0 and faithful.gate_passed and faithful.displacement < 0.05
+    small = scene(n, obj_at=lambda t: (OBJ_AT[0] + round(6 * t / (n - 1)), OBJ_AT[1]))  # 6 px ≤ 10: still fine
+    assert tr.t4_score(small, np.array(OBJ_AT, float), mask, g_ref).score == 100.0
+    moved = scene(n, obj_at=lambda t: (OBJ_AT[0] + round(16 * t / (n - 1)), OBJ_AT[1] - round(12 * t / (n - 1))))
+    s = tr.t4_score(moved, np.array(OBJ_AT, float), mask, g_ref)
+    assert s.gate_passed and s.displacement == pytest.approx(20.0, abs=0.5) and s.score == 0.0
+
+
+def test_half_speed_arm_passes_the_gate_and_less_fails():
+    """The gate is relative: a hand that covers 60% of the reference path passes, 40% fails."""
+    n = 21
+    mask = hand_mask()
+    g_ref = tr.motion_gate(scene(n), mask)
+    for fraction, passes in ((0.6, True), (0.4, False)):
+        part = video(n, [(OBJ, lambda t: OBJ_AT), (HAND, lambda t: hand_at(round(fraction * t), n))])
+        assert tr.t4_score(part, np.array(OBJ_AT, float), mask, g_ref).gate_passed is passes
+
+
+def test_low_resolution_rgb_is_resized_to_the_scoring_frame():
+    """A 128² RGB video whose object slides 6 px at 128² moves 12 px in the scoring frame (fails d ≤ 10)."""
+    n = 11
+    small = video(n, [(OBJ, lambda t: (OBJ_AT[0] + round(12 * t / (n - 1)), OBJ_AT[1]))])
+    rgb = np.stack([cv2.cvtColor(cv2.resize(f, (128, 128), interpolation=cv2.INTER_AREA), cv2.COLOR_GRAY2RGB)
+                    for f in small])
+    assert tr.scoring_frames(rgb).shape == (n, S, S)
+    assert tr.object_motion(tr.scoring_frames(rgb), np.array(OBJ_AT, float)).displacement == pytest.approx(12, abs=0.6)
+
+
+def test_bad_inputs_are_refused():
+    with pytest.raises(ValueError, match="uint8"):
+        tr.scoring_frames(np.zeros((2, 8, 8, 3), np.float32))
+    with pytest.raises(ValueError, match="video"):
+        tr.scoring_frames(np.zeros((8, 8), np.uint8))
+    with pytest.raises(ValueError, match="gate_reference"):
+        tr.t4_score(scene(3), np.array(OBJ_AT, float), hand_mask(), 0.0)

@@ -1,0 +1,324 @@
+"""T4 Interaction grounding (SPEC §3 T4): validated no-contact rollouts of three kinds, balanced by slot.
+
+- distractor: one primitive from `PALETTE` (built by the scene loader, so segmentation ids of the task stay
+  the same) is put where the task's target lay in a same-task donor episode (another seed); the original
+  expert actions are replayed. Kept if it is in view, clear of the task objects and of the robot's swept
+  region, never contacted nor displaced, and the task still succeeds. Evaluated object: the distractor.
+- false_contact: the expert's arm trajectory with the gripper command clamped open (+1) throughout. Kept if
+  both fingers stay open and nothing is ever touched (so the target stays put). Evaluated object: the target.
+- spatial_proximity: the target is moved, at rest, outside the swept region of the original rollout; the
+  same actions are replayed. Kept if it is in view, clear of the other objects, never touched nor displaced.
+  Evaluated object: the target.
+Every proposal is validated unrendered first (common validity + the kind's rule over the whole rollout);
+only then is it rendered, checked again, and tracked with `wsp_eval.tracking`: the reference gate must reach
+`GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100.
+Thresholds and task choices are documented in docs/t4.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import sapien
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.validity import check_rollout
+from wsp_data.platforms.maniskill import GRIPPER_OPEN, ExtraActor, ManiSkillPlatform, Rollout, _np
+from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN
+from wsp_data.sources.experts import ExpertSource, task_spec
+from wsp_data.staging import RolloutArrays
+from wsp_eval.tracking import (
+    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, motion_gate, object_motion, project,
+    scoring_frames, scoring_mask, t4_score,
+)
+
+KINDS = ("distractor", "false_contact", "spatial_proximity")
+# Which tasks serve which kind (docs/t4.md): false contact needs an expert that grasps the target; spatial
+# proximity needs a single dominant target whose removal leaves the robot nothing else to touch.
+KIND_TASKS: dict[str, tuple[str, ...]] = {
+    "distractor": ("PickCube", "PushCube", "PullCube", "StackCube", "PlaceSphere", "LiftPegUpright", "RollBall"),
+    "false_contact": ("PickCube", "StackCube", "PlaceSphere", "LiftPegUpright"),
+    "spatial_proximity": ("PickCube", "PushCube", "PullCube", "StackCube", "PlaceSphere", "LiftPegUpright",
+                          "RollBall"),
+}
+
+POS_TOL = 0.005  # m: an object that never strays this far from its frame-0 position "stays put"
+ROT_TOL = 0.05  # rad: … and never turns this far
+FINGER_OPEN = 0.035  # m: each Panda finger joint opens to 0.04; below this the gripper closed on something
+SWEPT_MARGIN = 0.10  # m: a moved target's footprint keeps this far from every low robot link origin
+DISTRACTOR_MARGIN = 0.05  # m: the same for a distractor (a prefilter only: the contact check decides)
+REACH_Z = 0.12  # m: link origins above this height cannot touch a tabletop object (≤ 5 cm tall)
+CLEARANCE = 0.02  # m: gap between a placed object and any other task object (xy bounding boxes)
+WORKSPACE = ((-0.35, 0.25), (-0.35, 0.35))  # m: x and y ranges a target may be moved to (on the table, in view)
+VIEW_MARGIN = QUERY_RADIUS + LK_WINDOW // 2 + 1  # px: the query grid and its windows stay inside the frame
+ROBOT_CLEARANCE = QUERY_RADIUS + 1  # px: no query point on the robot's silhouette at frame 0
+DONOR_TRIES = 12  # donor episodes tried for a distractor placement
+PLACEMENT_TRIES = 256  # random target placements tried for spatial proximity
+MIN_TEXTURED = 5  # of the 9 query points must carry texture at frame 0
+MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object must be tracked
+REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
+
+_YELLOW, _PURPLE, _CYAN = (0.95, 0.8, 0.1, 1.0), (0.55, 0.25, 0.75, 1.0), (0.1, 0.75, 0.8, 1.0)
+PALETTE = tuple(ExtraActor(f"distractor_{i}", shape, (h, h, h), color) for i, (shape, h, color) in enumerate((
+    ("box", 0.02, _YELLOW), ("box", 0.025, _PURPLE), ("box", 0.02, _CYAN),
+    ("sphere", 0.02, _PURPLE), ("sphere", 0.025, _CYAN), ("sphere", 0.02, _YELLOW),
+)))
+
+
+@dataclass
+class Proposal:
+    """What to replay: actions, placements after reset, the recorded objects and the evaluated one."""
+
+    actions: np.ndarray
+    objects: tuple[str, ...]
+    evaluated: str
+    placements: dict[str, np.ndarray]
+    params: dict
+
+    @property
+    def index(self) -> int:
+        return self.objects.index(self.evaluated)
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    return sapien.Pose(q=np.asarray(q, np.float64)).to_transformation_matrix()[:3, :3]
+
+
+def _box_xy(vertices: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """xy bounding box [[x0, y0], [x1, y1]] of local mesh vertices placed at a world pose (xyz, wxyz)."""
+    world = vertices @ _rotation(pose[3:]).T + pose[:3]
+    return np.stack([world[:, :2].min(0), world[:, :2].max(0)])
+
+
+def _gap(box: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance from each xy point (N, 2) to an xy box."""
+    d = np.maximum(box[0] - points, 0) + np.maximum(points - box[1], 0)
+    return np.linalg.norm(d, axis=-1)
+
+
+def _box_gap(a: np.ndarray, b: np.ndarray) -> float:
+    d = np.maximum(np.maximum(a[0] - b[1], b[0] - a[1]), 0)
+    return float(np.linalg.norm(d))
+
+
+def static(poses: np.ndarray) -> bool:
+    """(T, 7) poses never leave frame 0's by POS_TOL (m) or ROT_TOL (rad)."""
+    dp = np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1)
+    dq = 2 * np.arccos(np.clip(np.abs(poses[:, 3:] @ poses[0, 3:]), 0, 1))
+    return bool(dp.max() < POS_TOL and dq.max() < ROT_TOL)
+
+
+class _TaskRig:
+    """One task's simulators in one worker: expert source, unrendered and rendered replays (with the palette)."""
+
+    def __init__(self, task: str):
+        self.spec = task_spec(task)
+        self.expert = ExpertSource(task)
+        self.state = ManiSkillPlatform(task, render=False, objects=self.spec.objects, extras=PALETTE)
+        self.render = ManiSkillPlatform(task, render=True, objects=self.spec.objects, extras=PALETTE)
+        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+        self.intrinsic, self.extrinsic = self.state.camera_params()
+        self._pin = self.state.robot._objs[0].create_pinocchio_model()
+
+    def close(self) -> None:
+        self.expert.close()
+        self.state.close()
+        self.render.close()
+
+    def replay(self, platform: ManiSkillPlatform, seed: int, p: Proposal) -> Rollout:
+        platform.object_names = p.objects
+        return platform.replay(seed, p.actions, p.placements)
+
+    def footprint(self, qpos: np.ndarray) -> np.ndarray:
+        """xy of every robot link origin below REACH_Z over a rollout (forward kinematics of its qpos): the
+    robot's swept region, before the margin (the base link, at table height, is always in it)."""
+        base = self.state.robot.pose.sp
+        links = range(len(self.state.robot.get_links()))
+        pts = []
+        for q in qpos.astype(np.float64):
+            self._pin.compute_forward_kinematics(q)
+            pts.extend((base * self._pin.get_link_pose(i)).p for i in links)
+        pts = np.asarray(pts)
+        return pts[pts[:, 2] < REACH_Z, :2]
+
+    def local_vertices(self, name: str) -> np.ndarray:
+        """Collision mesh vertices of a task object in its own frame (the scene of the last reset)."""
+        return np.asarray(self.state.actor(name).get_first_collision_mesh(to_world_frame=False).vertices)
+
+    def sight(self, seed: int) -> _Sight:
+        """What the camera sees at frame 0 of `seed` (one rendered reset: the robot's rest silhouette)."""
+        return _Sight(self.intrinsic, self.extrinsic, self.render.reset(seed).mask)
+
+
+class _Sight:
+    """Frame-0 visibility of a world point: `VIEW_MARGIN` px inside the frame and `ROBOT_CLEARANCE` px clear
+    of the robot's silhouette (the frame every model shares)."""
+
+    def __init__(self, intrinsic: np.ndarray, extrinsic: np.ndarray, robot_mask: np.ndarray):
+        self.intrinsic, self.extrinsic = intrinsic, extrinsic
+        free = (scoring_mask(robot_mask) == 0).astype(np.uint8)
+        self.clearance = cv2.distanceTransform(free, cv2.DIST_L2, 5)  # px to the nearest robot pixel
+
+    def __call__(self, xyz: np.ndarray) -> bool:
+        try:
+            x, y = project(xyz, self.intrinsic, self.extrinsic, IMAGE_SIZE)
+        except ValueError:
+            return False
+        inside = VIEW_MARGIN <= min(x, y) and max(x, y) <= SCORING_SIZE - 1 - VIEW_MARGIN
+        return bool(inside and self.clearance[int(round(y)), int(round(x))] >= ROBOT_CLEARANCE)
+
+
+class T4Builder(SuiteBuilder):
+    suite = "t4"
+    title = "T4 Interaction grounding"
+    description = ("Validated no-contact rollouts, balanced over three kinds (`kind`): a distractor inserted where "
+                   "the target lay in a same-task donor episode (task still succeeds), false contact (expert arm "
+                   "path, gripper clamped open), spatial proximity (target moved outside the robot's swept region). "
+                   "The evaluated object never moves: `evaluated_object` (index `evaluated_object_index` in "
+                   "`objects`), its frame-0 pixel `object_pixel_256` in the 256x256 scoring frame, and the "
+                   "reference motion gate `gate_reference` (px). Score: tracked object displacement <= 10 px "
+                   "behind a distal-arm motion gate.")
+    roles = ("reference",)
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        self.kind_tasks = {k: tuple(t for t in config.tasks if t in KIND_TASKS[k]) for k in KINDS}
+        missing = [k for k, ts in self.kind_tasks.items() if not ts]
+        if missing:
+            raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; tasks per kind: "
+                             + "; ".join(f"{k}: {', '.join(KIND_TASKS[k])}" for k in missing))
+        self._rigs: dict[str, _TaskRig] = {}
+
+    def plan(self, slot: int) -> SlotPlan:
+        kind = KINDS[slot % len(KINDS)]
+        tasks = self.kind_tasks[kind]
+        return SlotPlan(tasks[(slot // len(KINDS)) % len(tasks)], kind)
+
+    def rig(self, task: str) -> _TaskRig:
+        if task not in self._rigs:
+            self._rigs[task] = _TaskRig(task)
+        return self._rigs[task]
+
+    def close(self) -> None:
+        for r in self._rigs.values():
+            r.close()
+        self._rigs.clear()
+
+    # -- proposals ------------------------------------------------------------------------------
+    def _distractor(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
+                    rng: np.random.Generator) -> Proposal | str:
+        objects = rig.spec.objects
+        if len(objects) >= MAX_OBJECTS:
+            return "too_many_objects"
+        extra = PALETTE[int(rng.integers(len(PALETTE)))]
+        boxes = [_box_xy(rig.local_vertices(n), base.observations[0].object_poses[i]) for i, n in enumerate(objects)]
+        footprint = rig.footprint(base.stack("qpos"))
+        h = extra.half_size[0]
+        r = float(np.hypot(h, h)) if extra.shape == "box" else h
+        rig.state.object_names = objects
+        for donor in rng.integers(SEED_BASE["t4"], SEED_BASE["t4"] + SEED_SPAN, size=DONOR_TRIES):
+            donor_pose = rig.state.reset(int(donor)).object_poses[0].astype(np.float64)
+            yaw = np.arctan2(*_rotation(donor_pose[3:])[[1, 0], 0])
+            pose = np.array([*donor_pose[:2], h, np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+            box = np.stack([pose[:2] - r, pose[:2] + r])
+            if (sight(pose[:3]) and _gap(box, footprint).min(initial=np.inf) >= DISTRACTOR_MARGIN
+                    and all(_box_gap(box, b) >= CLEARANCE for b in boxes)):
+                params = {"kind": "distractor", "donor_seed": int(donor), "shape": extra.shape,
+                          "half_size": h, "color": list(extra.color), "pose": pose.tolist()}
+                return Proposal(source, objects + (extra.name,), extra.name, {extra.name: pose}, params)
+        return "no_clear_donor_placement"
+
+    def _false_contact(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
+                       rng: np.random.Generator) -> Proposal | str:
+        if not (source[:, 7] < GRIPPER_OPEN).any():
+            return "source_never_closes"
+        if not sight(base.observations[0].object_poses[0, :3]):
+            return "object_out_of_sight"
+        actions = source.copy()
+        actions[:, 7] = GRIPPER_OPEN
+        return Proposal(actions, rig.spec.objects, rig.spec.target, {}, {"kind": "false_contact",
+                                                                          "gripper": GRIPPER_OPEN})
+
+    def _spatial_proximity(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
+                           rng: np.random.Generator) -> Proposal | str:
+        objects, target = rig.spec.objects, rig.spec.target
+        poses = base.observations[0].object_poses.astype(np.float64)
+        box = _box_xy(rig.local_vertices(target), poses[0])
+        others = [_box_xy(rig.local_vertices(n), poses[i]) for i, n in enumerate(objects) if i > 0]
+        footprint = rig.footprint(base.stack("qpos"))
+        lo, hi = np.array(WORKSPACE).T
+        for xy in rng.uniform(lo, hi, size=(PLACEMENT_TRIES, 2)):
+            shift = xy - poses[0, :2]
+            moved = box + shift
+            pose = poses[0].copy()
+            pose[:2] = xy
+            if (sight(pose[:3]) and _gap(moved, footprint).min(initial=np.inf) >= SWEPT_MARGIN
+                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
+                params = {"kind": "spatial_proximity", "from": poses[0].tolist(), "to": pose.tolist()}
+                return Proposal(source, objects, target, {target: pose}, params)
+        return "no_clear_placement"
+
+    # -- validation -----------------------------------------------------------------------------
+    def violation(self, rig: _TaskRig, kind: str, p: Proposal, ro: Rollout) -> str | None:
+        """The first failed check of a rollout: common validity (SPEC §5), then the kind's rule."""
+        poses, contacts = ro.stack("object_poses"), ro.stack("contacts")
+        if (why := check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), poses, ro.actions, rig.qlimits)):
+            return why
+        k = p.index
+        if contacts[:, k].any():
+            return "evaluated_object_contacted"
+        if not static(poses[:, k].astype(np.float64)):
+            return "evaluated_object_moved"
+        if kind == "distractor":
+            return None if ro.success else "task_failed"
+        if contacts.any():
+            return "other_object_contacted"
+        if kind == "false_contact" and (ro.stack("qpos")[:, 7:9] < FINGER_OPEN).any():
+            return "gripper_closed"
+        return None
+
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        rig, kind = self.rig(plan.task), plan.group
+        source = rig.expert.trajectory(seed)
+        if source is None:
+            return Dropped("source_failed")
+        original = Proposal(source, rig.spec.objects, rig.spec.target, {}, {})
+        base = rig.replay(rig.state, seed, original)  # the original rollout: swept region and object geometry
+        simulated = len(source)
+        proposal = getattr(self, f"_{kind}")(rig, base, source, rig.sight(seed), rng)
+        if isinstance(proposal, str):
+            return Dropped(proposal, simulated_steps=simulated)
+        ro = rig.replay(rig.state, seed, proposal)
+        simulated += len(source)
+        if (why := self.violation(rig, kind, proposal, ro)) is not None:
+            return Dropped(why, simulated_steps=simulated)
+        ref = rig.replay(rig.render, seed, proposal)  # only validated proposals are rendered
+        rendered = len(source)
+        if (why := self.violation(rig, kind, proposal, ref)) is not None:
+            return Dropped(why, rendered, simulated)
+        k = proposal.index
+        pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic, IMAGE_SIZE)
+        rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
+        grey = scoring_frames(rgb)
+        gate = motion_gate(grey, mask0)
+        if gate < GATE_MIN_REFERENCE:
+            return Dropped("gate_too_small", rendered, simulated, {"gate": gate})
+        motion = object_motion(grey, pixel)
+        if motion.textured_points < MIN_TEXTURED or motion.visible_fraction < MIN_VISIBLE:
+            return Dropped("object_untrackable", rendered, simulated,
+                           {"textured": motion.textured_points, "visible": motion.visible_fraction})
+        score = t4_score(rgb, pixel, mask0, gate)
+        if score.score != 100.0:
+            return Dropped("reference_fails_tracker", rendered, simulated, {"d": score.displacement})
+        if score.displacement > REFERENCE_D_MAX:
+            return Dropped("reference_tracking_drifts", rendered, simulated, {"d": score.displacement})
+        row = {
+            "task": plan.task, "seed": seed, "instruction": rig.spec.instruction, "objects": list(proposal.objects),
+            "source": "scripted_expert", "kind": kind, "evaluated_object": proposal.evaluated,
+            "evaluated_object_index": k, "object_pixel_256": [float(x) for x in pixel], "gate_reference": gate,
+            "displacement_reference": score.displacement, "object_visible_fraction": motion.visible_fraction,
+            "interventions": {"reference": proposal.params},
+        }
+        return Kept(row, [RolloutArrays.from_rollout("reference", ref)], rendered, simulated)
