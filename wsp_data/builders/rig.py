@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Generic, TypeVar
+
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
 from wsp_data.sources.experts import ExpertSource, task_spec
@@ -27,15 +30,19 @@ class TaskRig:
                              self.qlimits)
 
 
-class RigCache:
-    """Task → `TaskRig`, created on first use and kept for the life of the worker."""
+R = TypeVar("R")
 
-    def __init__(self):
-        self._rigs: dict[str, TaskRig] = {}
 
-    def __call__(self, task: str) -> TaskRig:
+class RigCache(Generic[R]):
+    """Task → rig (`TaskRig` or a suite's own), created on first use and kept for the life of the worker."""
+
+    def __init__(self, factory: Callable[[str], R] = TaskRig):
+        self._factory = factory
+        self._rigs: dict[str, R] = {}
+
+    def __call__(self, task: str) -> R:
         if task not in self._rigs:
-            self._rigs[task] = TaskRig(task)
+            self._rigs[task] = self._factory(task)
         return self._rigs[task]
 
     def close(self) -> None:

@@ -17,6 +17,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
 from wsp_data.builders.validity import MAX_JOINT_SPEED, check_rollout
 from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
 from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN
@@ -140,17 +141,10 @@ class T2Builder(SuiteBuilder):
         if MAX_ATTEMPTS * config.count > DONOR_SEED_OFFSET:
             raise ValueError(f"T2 supports at most {DONOR_SEED_OFFSET // MAX_ATTEMPTS} instances per config: receiver "
                              f"scene seeds must stay below the donor seeds (offset {DONOR_SEED_OFFSET})")
-        self._rigs: dict[str, _TaskRig] = {}
-
-    def rig(self, task: str) -> _TaskRig:
-        if task not in self._rigs:
-            self._rigs[task] = _TaskRig(task)
-        return self._rigs[task]
+        self.rig = RigCache(_TaskRig)
 
     def close(self) -> None:
-        for r in self._rigs.values():
-            r.close()
-        self._rigs.clear()
+        self.rig.close()
 
     def compatible_donors(self, receiver: str) -> list[str]:
         """The config's other tasks whose typical stream starts within START_GAP (every arm joint) of the

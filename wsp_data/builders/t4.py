@@ -24,6 +24,7 @@ import numpy as np
 import sapien
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import GRIPPER_OPEN, ExtraActor, ManiSkillPlatform, Rollout, _np
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN
@@ -189,22 +190,15 @@ class T4Builder(SuiteBuilder):
         if missing:
             raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; tasks per kind: "
                              + "; ".join(f"{k}: {', '.join(KIND_TASKS[k])}" for k in missing))
-        self._rigs: dict[str, _TaskRig] = {}
+        self.rig = RigCache(_TaskRig)
 
     def plan(self, slot: int) -> SlotPlan:
         kind = KINDS[slot % len(KINDS)]
         tasks = self.kind_tasks[kind]
         return SlotPlan(tasks[(slot // len(KINDS)) % len(tasks)], kind)
 
-    def rig(self, task: str) -> _TaskRig:
-        if task not in self._rigs:
-            self._rigs[task] = _TaskRig(task)
-        return self._rigs[task]
-
     def close(self) -> None:
-        for r in self._rigs.values():
-            r.close()
-        self._rigs.clear()
+        self.rig.close()
 
     # -- proposals ------------------------------------------------------------------------------
     def _distractor(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
