@@ -23,6 +23,7 @@ configure_cpu_rendering()
 
 import mani_skill.envs  # noqa: E402,F401  (registers the tasks)
 import sapien  # noqa: E402
+import sapien.physx as physx  # noqa: E402
 import torch  # noqa: E402
 from mani_skill.utils.registration import REGISTERED_ENVS  # noqa: E402
 from mani_skill.utils.structs import Pose  # noqa: E402
@@ -56,6 +57,10 @@ class ExtraActor:
     half_size: tuple[float, float, float]
     color: tuple[float, float, float, float] = (0.15, 0.35, 0.85, 1.0)
     density: float = 1000.0
+    # PhysX puts a body whose kinetic energy stays below its sleep threshold (ManiSkill: 0.005) to sleep and
+    # zeroes its velocity: a tapped ball rolling at 0.2 m/s froze after ~5 cm (measured). Props that must
+    # roll or topple on their own set sleeps=False.
+    sleeps: bool = True
 
     def add_to(self, builder) -> None:
         material = sapien.render.RenderMaterial(base_color=list(self.color))
@@ -146,6 +151,7 @@ class ManiSkillPlatform:
         self.u = self.env.unwrapped
         self._prune_sensors()
         self.object_names = objects
+        self._awake = tuple(e.name for e in extras if not e.sleeps)
         self._lut: np.ndarray | None = None
         self._pin = None
 
@@ -194,6 +200,8 @@ class ManiSkillPlatform:
         obs, _ = self.env.reset(seed=int(seed), options={"reconfigure": True})
         self._prune_sensors()
         self._lut = None  # segmentation ids are re-read from the rebuilt scene
+        for name in self._awake:
+            self.actor(name)._objs[0].find_component_by_type(physx.PhysxRigidDynamicComponent).set_sleep_threshold(0.0)
         if placements:
             for name, pose in placements.items():
                 pose = torch.as_tensor(np.asarray(pose, dtype=np.float32))[None]

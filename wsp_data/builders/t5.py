@@ -1,0 +1,195 @@
+"""T5 Interaction dynamics (SPEC §3 T5).
+
+Proposal: a replay-verified successful expert trajectory of the slot's task; its branch step is
+`BACKOFF` steps before first contact (the first frame where a robot link touches the task's target, or the
+target has moved 2 mm, whichever comes first: contacts shorter than a physics substep can go unflagged). The
+expert's script is re-run up to that step and the slot's primitive (`wsp_data.sources.primitives`) replaces
+the rest. Knock-over and tap act on a prop added beside the target by a scene hook (a tall box, a ball); their
+source must succeed with the prop resting there untouched.
+Validation, unrendered first: common validity (SPEC §5), no other object shifted by more than 1 cm, and the
+primitive's acceptance rule (`t5_rules`) on the evaluated object's simulator states; only then rendered, and
+re-checked on the rendered rollout. Slots are balanced exactly by primitive: slot k gets `PRIMITIVES[k % 8]`
+and the next of that primitive's compatible tasks (`PRIMITIVE_TASKS`) in turn.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.t5_rules import MOTION_ONSET, PRIMITIVES, check
+from wsp_data.builders.validity import check_rollout
+from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform, Rollout, _np
+from wsp_data.schema import IMAGE_SIZE
+from wsp_data.sources.experts import task_spec
+from wsp_data.sources.primitives import PROPS, SCRIPTS, BranchScript, prop_placement
+from wsp_data.staging import RolloutArrays
+
+# Which tasks serve which primitive. The evaluated object is the task's target (first object), except for
+# knock-over and tap, whose evaluated object is their prop (`PROPS`): the tasks' own objects are no tall
+# objects, and a cube stops as soon as the hand leaves it, so only a rolling ball answers a brief strike.
+PRIMITIVE_TASKS: dict[str, tuple[str, ...]] = {
+    "push": ("PushCube", "PickCube", "PullCube", "StackCube"),
+    "pull": ("PullCube", "PickCube", "PushCube", "StackCube"),
+    "drag": ("PickCube", "StackCube", "PushCube", "PullCube"),
+    "rotate": ("PickCube", "StackCube", "PushCube", "PullCube"),
+    "shake": ("PickCube", "StackCube", "PushCube", "PullCube"),
+    "tap": ("PickCube", "PushCube", "PullCube", "StackCube"),
+    "knock-over": ("PickCube", "PushCube", "PullCube", "StackCube"),
+    "drop": ("PickCube", "StackCube", "PlaceSphere", "PushCube"),
+}
+BACKOFF = 4  # steps (0.2 s) before first contact
+OTHER_OBJECT_MAX_SHIFT = 0.01  # m: any other object moving more is an unintended collision
+SOURCE_PROP_MAX_SHIFT = 0.001  # m: a prop must rest untouched through the source trajectory
+PIXEL_SCALE = 256 / IMAGE_SIZE  # the evaluators' 256×256 frame
+
+
+class _Rig:
+    """One task's simulators in one worker (with a prop, if any): branching script, unrendered and rendered
+    `pd_joint_pos` replays, all built with the same scene extras."""
+
+    def __init__(self, task: str, prop: ExtraActor | None):
+        self.spec = task_spec(task)
+        extras = (prop,) if prop else ()
+        self.objects = self.spec.objects + tuple(e.name for e in extras)
+        self.script = BranchScript(task, self.objects, extras)
+        self.state = ManiSkillPlatform(task, render=False, objects=self.objects, extras=extras)
+        self.render = ManiSkillPlatform(task, render=True, objects=self.objects, extras=extras)
+        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+
+    def close(self) -> None:
+        for p in (self.script, self.state, self.render):
+            p.close()
+
+    def invalid(self, ro: Rollout) -> str | None:
+        return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
+                             self.qlimits)
+
+
+def first_contact(poses: np.ndarray, contacts: np.ndarray) -> int | None:
+    """First frame where the robot touches the object or the object has moved `MOTION_ONSET` from its start."""
+    moved = np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1) >= MOTION_ONSET
+    hits = np.nonzero(contacts | moved)[0]
+    return int(hits[0]) if len(hits) else None
+
+
+def max_shift(poses: np.ndarray) -> float:
+    """Largest distance of an object from its frame-0 position, (T, 7) poses."""
+    return float(np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1).max())
+
+
+def pixel_256(ro: Rollout, position: np.ndarray) -> list[float]:
+    """A world point projected into the 256×256 evaluator frame with the rollout's camera."""
+    cam = ro.extrinsic @ np.append(position, 1.0)
+    uv = (ro.intrinsic @ cam)[:2] / cam[2]
+    return [float(x) for x in uv * PIXEL_SCALE]
+
+
+class T5Builder(SuiteBuilder):
+    suite = "t5"
+    title = "T5 Interaction dynamics"
+    description = ("A replay-verified expert trajectory branched 4 steps before first contact, the rest replaced by a "
+                   "scripted primitive (push, pull, drag, rotate, shake, tap, knock-over, drop), balanced by "
+                   "primitive. Kept only when the evaluated object's simulator states pass the primitive's rule "
+                   "(`primitive`, `evaluated_object` and the measured quantities are columns). Score: primitive "
+                   "judge on 12 frames.")
+    roles = ("reference",)
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        missing = [p for p in PRIMITIVES if not self.compatible(p)]
+        if missing:
+            raise ValueError("T5 needs, for every primitive, one of its tasks among the selected ones; none for "
+                             + "; ".join(f"{p} (needs one of {', '.join(PRIMITIVE_TASKS[p])})" for p in missing))
+        self._rigs: dict[tuple[str, str | None], _Rig] = {}
+
+    def compatible(self, primitive: str) -> list[str]:
+        return [t for t in PRIMITIVE_TASKS[primitive] if t in self.config.tasks]
+
+    def plan(self, slot: int) -> SlotPlan:
+        primitive = PRIMITIVES[slot % len(PRIMITIVES)]
+        tasks = self.compatible(primitive)
+        return SlotPlan(tasks[(slot // len(PRIMITIVES)) % len(tasks)], primitive)
+
+    def rig(self, task: str, prop: ExtraActor | None) -> _Rig:
+        key = (task, prop.name if prop else None)
+        if key not in self._rigs:
+            self._rigs[key] = _Rig(task, prop)
+        return self._rigs[key]
+
+    def close(self) -> None:
+        for r in self._rigs.values():
+            r.close()
+        self._rigs.clear()
+
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        primitive, prop = plan.group, PROPS.get(plan.group)
+        rig = self.rig(plan.task, prop)
+        script, spec = rig.script, rig.spec
+        target, others = spec.target, tuple(o for o in spec.objects if o != spec.target)
+        evaluated = prop.name if prop else target
+        ev = rig.objects.index(evaluated)
+        placements = None
+        if prop:
+            script.reset(seed)
+            placements = prop_placement(script, prop, target, others)
+            if placements is None:
+                return Dropped("no_room_for_prop")
+        # the source: the expert, scripted and verified in this very scene
+        script.reset(seed, placements)
+        try:
+            spec.solve(script)
+        except Exception:  # noqa: BLE001 - an unsolvable seed (IK or geometry failure) is just a miss
+            return Dropped("source_failed")
+        source = script.trajectory()
+        src = rig.state.replay(seed, source, placements)
+        simulated = 2 * len(source)
+        if not src.success:
+            return Dropped("source_failed", simulated_steps=simulated)
+        src_poses = src.stack("object_poses")
+        if prop and (src.stack("contacts")[:, ev].any() or max_shift(src_poses[:, ev]) > SOURCE_PROP_MAX_SHIFT):
+            return Dropped("source_disturbs_prop", simulated_steps=simulated)
+        contact = first_contact(src_poses[:, 0], src.stack("contacts")[:, 0])
+        if contact is None:
+            return Dropped("source_without_contact", simulated_steps=simulated)
+        branch = max(1, contact - BACKOFF)
+        # branch: the expert's script up to `branch`, then the primitive
+        script.reset(seed, placements)
+        script.run_until(spec.solve, branch)
+        if not np.array_equal(script.trajectory(), source[:branch]):
+            return Dropped("branch_mismatch", simulated_steps=simulated + branch)
+        SCRIPTS[primitive](script, target, others)
+        stream = script.trajectory()
+        ro = rig.state.replay(seed, stream, placements)
+        simulated += 2 * len(stream)
+        if (why := self.reject(rig, ro, primitive, ev)) is not None:
+            return Dropped(why, simulated_steps=simulated)
+        rendered = rig.render.replay(seed, stream, placements)
+        steps = len(stream)
+        if (why := self.reject(rig, rendered, primitive, ev)) is not None:
+            return Dropped(f"rendered_{why}", steps, simulated)
+        poses = rendered.stack("object_poses")
+        base_xy = _np(rig.state.robot.pose.p[0, :2]).astype(float).tolist()
+        _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy)
+        parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": branch,
+                      "placements": {k: v.astype(float).tolist() for k, v in (placements or {}).items()}}
+        row = {
+            "task": plan.task, "seed": seed, "instruction": spec.instruction, "objects": list(rig.objects),
+            "source": "scripted_expert+scripted_primitive", "primitive": primitive, "evaluated_object": evaluated,
+            "evaluated_index": ev, "branch_step": branch, "first_contact_step": contact,
+            "source_length": len(source), "robot_base_xy": base_xy,
+            "object_pixel_256": pixel_256(rendered, poses[0, ev, :3].astype(np.float64)),
+            **measured, "interventions": {"reference": parameters},
+        }
+        return Kept(row, [RolloutArrays.from_rollout("reference", rendered)], steps, simulated)
+
+    @staticmethod
+    def reject(rig: _Rig, ro: Rollout, primitive: str, ev: int) -> str | None:
+        """Why a rollout is not a valid reference of `primitive` on object column `ev`, or None."""
+        if (why := rig.invalid(ro)) is not None:
+            return why
+        poses = ro.stack("object_poses")
+        if any(max_shift(poses[:, i]) > OTHER_OBJECT_MAX_SHIFT for i in range(len(rig.objects)) if i != ev):
+            return "disturbed_other_object"
+        ok, _ = check(primitive, poses[:, ev], ro.stack("contacts")[:, ev], _np(rig.state.robot.pose.p[0, :2]))
+        return None if ok else "primitive_not_observed"
