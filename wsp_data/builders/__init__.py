@@ -9,7 +9,7 @@ from wsp_data.builders.t4 import T4Builder
 from wsp_data.builders.t5 import T5Builder
 from wsp_data.builders.train import TrainBuilder
 
-BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder, TrainBuilder, T4Builder, T2Builder, T5Builder,)}
+BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder, T2Builder, T4Builder, T5Builder, TrainBuilder)}
 
 
 def builder_class(suite: str) -> type[SuiteBuilder]:
