@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import build_tiny, instance_rows, open_lerobot
 
 from wsp_data.builders.t2 import (
     BLOCK_STEPS, MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
@@ -20,28 +21,18 @@ TASKS = ("PickCube", "PushCube", "PullCube")
 
 @pytest.fixture(scope="module")
 def release(tmp_path_factory):
-    from wsp_data.build import build
-    from wsp_data.builders import BuildConfig
-
-    out = tmp_path_factory.mktemp("t2") / "worldsimprobe"
-    result = build(BuildConfig(suite="t2", platform="maniskill", count=3, tasks=TASKS), out, progress=False)
-    assert result.assembled
-    return out
+    return build_tiny(tmp_path_factory, "t2", 3, TASKS)
 
 
 @pytest.fixture(scope="module")
 def rows(release):
-    from datasets import load_dataset
-
-    return load_dataset(str(release), "t2_maniskill", split="test")
+    return instance_rows(release, "t2_maniskill")
 
 
 @pytest.fixture(scope="module")
 def episodes(release, rows):
     """Per instance, its reference episode as arrays decoded from the LeRobot dataset."""
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    ds = LeRobotDataset("worldsimprobe/t2_maniskill", root=release / "t2_maniskill")
+    ds = open_lerobot(release, "t2_maniskill")
     assert ds.num_episodes == len(rows)
     out = []
     for r in rows:

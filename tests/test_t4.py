@@ -10,6 +10,7 @@ from collections import Counter
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import build_tiny, instance_rows, open_lerobot
 
 from wsp_data.schema import INSTANCES, MASK_KEY, VIDEO_KEY
 
@@ -22,28 +23,17 @@ CLEAR_M = 0.04  # distractor centre ≥ 4 cm from every task object's centre (2 
 
 @pytest.fixture(scope="module")
 def release(tmp_path_factory):
-    from wsp_data.build import build
-    from wsp_data.builders import BuildConfig
-
-    out = tmp_path_factory.mktemp("t4") / "worldsimprobe"
-    config = BuildConfig(suite="t4", platform="maniskill", count=6, tasks=("PickCube",), seed=0, max_attempts=8)
-    result = build(config, out, progress=False)
-    assert result.assembled
-    return out
+    return build_tiny(tmp_path_factory, "t4", 6, ("PickCube",))
 
 
 @pytest.fixture(scope="module")
 def rows(release):
-    from datasets import load_dataset
-
-    return load_dataset(str(release), "t4_maniskill", split="test")
+    return instance_rows(release, "t4_maniskill")
 
 
 @pytest.fixture(scope="module")
 def ds(release):
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
-
-    return LeRobotDataset("worldsimprobe/t4_maniskill", root=release / "t4_maniskill")
+    return open_lerobot(release, "t4_maniskill")
 
 
 @pytest.fixture(scope="module")

@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
+from conftest import build_tiny, instance_rows, open_lerobot
 
 from wsp_data.builders.t5_rules import PRIMITIVES, check, measure, passes, reversals, tilt, yaw_track
 from wsp_data.sources.primitives import PROPS
@@ -172,20 +173,12 @@ NOT = {
 
 @pytest.fixture(scope="module")
 def release(tmp_path_factory):
-    from wsp_data.build import build
-    from wsp_data.builders import BuildConfig
-
-    out = tmp_path_factory.mktemp("t5") / "worldsimprobe"
-    result = build(BuildConfig("t5", "maniskill", 8, ("PickCube",)), out, progress=False)
-    assert result.assembled
-    return out
+    return build_tiny(tmp_path_factory, "t5", 8, ("PickCube",))
 
 
 @pytest.fixture(scope="module")
 def rows(release):
-    from datasets import load_dataset
-
-    return load_dataset(str(release), CONFIG, split="test")
+    return instance_rows(release, CONFIG)
 
 
 @pytest.fixture(scope="module")
@@ -246,9 +239,8 @@ def test_stored_states_show_the_branch(rows, frames):
 
 
 def test_lerobot_opens_the_config(release, rows):
-    from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    ds = LeRobotDataset(f"worldsimprobe/{CONFIG}", root=release / CONFIG)
+    ds = open_lerobot(release, CONFIG)
     assert ds.num_episodes == len(rows) == 8
     eps = ds.meta.episodes
     for r in rows:
