@@ -195,6 +195,17 @@ def frames(release):
     return {e: {k: np.asarray(v) for k, v in ep.items()} for e, ep in eps.items()}
 
 
+def test_pixel_is_the_projection_of_the_stored_pose(rows, frames):
+    """object_pixel_256 uses the same convention as T4's: the frame-0 centre through the stored camera
+    (128² image), scaled to 256² with pixel centres kept, x256 = 2·(x128 + 0.5) − 0.5 (float round-off only)."""
+    for r in rows:
+        K = np.reshape(r["camera_intrinsic"], (3, 3))
+        E = np.reshape(r["camera_extrinsic"], (3, 4))
+        cam = E @ np.append(frames[r["episode_indices"][0]]["poses"][0, r["evaluated_index"], :3], 1.0)
+        uv = (K @ cam)[:2] / cam[2]
+        assert np.allclose(r["object_pixel_256"], 2 * (uv + 0.5) - 0.5, atol=1e-3)
+
+
 def test_every_primitive_is_built_once(rows, release):
     assert sorted(rows["primitive"]) == sorted(PRIMITIVES)
     report = json.loads((release / CONFIG / "build_report.json").read_text())

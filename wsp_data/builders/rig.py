@@ -34,16 +34,17 @@ R = TypeVar("R")
 
 
 class RigCache(Generic[R]):
-    """Task → rig (`TaskRig` or a suite's own), created on first use and kept for the life of the worker."""
+    """Rigs (`TaskRig` or a suite's own) keyed by their factory's arguments (a task, or a task and a prop),
+    created on first use and kept for the life of the worker."""
 
-    def __init__(self, factory: Callable[[str], R] = TaskRig):
+    def __init__(self, factory: Callable[..., R] = TaskRig):
         self._factory = factory
-        self._rigs: dict[str, R] = {}
+        self._rigs: dict[tuple, R] = {}
 
-    def __call__(self, task: str) -> R:
-        if task not in self._rigs:
-            self._rigs[task] = self._factory(task)
-        return self._rigs[task]
+    def __call__(self, *key) -> R:
+        if key not in self._rigs:
+            self._rigs[key] = self._factory(*key)
+        return self._rigs[key]
 
     def close(self) -> None:
         for rig in self._rigs.values():

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
 from wsp_data.builders.t5_rules import MOTION_ONSET, PRIMITIVES, check
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform, Rollout, _np
@@ -24,6 +25,7 @@ from wsp_data.schema import IMAGE_SIZE
 from wsp_data.sources.experts import task_spec
 from wsp_data.sources.primitives import PROPS, SCRIPTS, BranchScript, prop_placement
 from wsp_data.staging import RolloutArrays
+from wsp_eval.tracking import project
 
 # Which tasks serve which primitive. The evaluated object is the task's target (first object), except for
 # knock-over and tap, whose evaluated object is their prop (`PROPS`): the tasks' own objects are no tall
@@ -41,7 +43,6 @@ PRIMITIVE_TASKS: dict[str, tuple[str, ...]] = {
 BACKOFF = 4  # steps (0.2 s) before first contact
 OTHER_OBJECT_MAX_SHIFT = 0.01  # m: any other object moving more is an unintended collision
 SOURCE_PROP_MAX_SHIFT = 0.001  # m: a prop must rest untouched through the source trajectory
-PIXEL_SCALE = 256 / IMAGE_SIZE  # the evaluators' 256×256 frame
 
 
 class _Rig:
@@ -78,13 +79,6 @@ def max_shift(poses: np.ndarray) -> float:
     return float(np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1).max())
 
 
-def pixel_256(ro: Rollout, position: np.ndarray) -> list[float]:
-    """A world point projected into the 256×256 evaluator frame with the rollout's camera."""
-    cam = ro.extrinsic @ np.append(position, 1.0)
-    uv = (ro.intrinsic @ cam)[:2] / cam[2]
-    return [float(x) for x in uv * PIXEL_SCALE]
-
-
 class T5Builder(SuiteBuilder):
     suite = "t5"
     title = "T5 Interaction dynamics"
@@ -101,7 +95,7 @@ class T5Builder(SuiteBuilder):
         if missing:
             raise ValueError("T5 needs, for every primitive, one of its tasks among the selected ones; none for "
                              + "; ".join(f"{p} (needs one of {', '.join(PRIMITIVE_TASKS[p])})" for p in missing))
-        self._rigs: dict[tuple[str, str | None], _Rig] = {}
+        self.rig = RigCache(_Rig)
 
     def compatible(self, primitive: str) -> list[str]:
         return [t for t in PRIMITIVE_TASKS[primitive] if t in self.config.tasks]
@@ -111,16 +105,8 @@ class T5Builder(SuiteBuilder):
         tasks = self.compatible(primitive)
         return SlotPlan(tasks[(slot // len(PRIMITIVES)) % len(tasks)], primitive)
 
-    def rig(self, task: str, prop: ExtraActor | None) -> _Rig:
-        key = (task, prop.name if prop else None)
-        if key not in self._rigs:
-            self._rigs[key] = _Rig(task, prop)
-        return self._rigs[key]
-
     def close(self) -> None:
-        for r in self._rigs.values():
-            r.close()
-        self._rigs.clear()
+        self.rig.close()
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
         primitive, prop = plan.group, PROPS.get(plan.group)
@@ -178,7 +164,8 @@ class T5Builder(SuiteBuilder):
             "source": "scripted_expert+scripted_primitive", "primitive": primitive, "evaluated_object": evaluated,
             "evaluated_index": ev, "branch_step": branch, "first_contact_step": contact,
             "source_length": len(source), "robot_base_xy": base_xy,
-            "object_pixel_256": pixel_256(rendered, poses[0, ev, :3].astype(np.float64)),
+            "object_pixel_256": [float(x) for x in project(poses[0, ev, :3], rendered.intrinsic,
+                                                           rendered.extrinsic, IMAGE_SIZE)],
             **measured, "interventions": {"reference": parameters},
         }
         return Kept(row, [RolloutArrays.from_rollout("reference", rendered)], steps, simulated)
