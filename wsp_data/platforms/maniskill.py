@@ -133,6 +133,12 @@ def _np(x) -> np.ndarray:
     return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
 
 
+def euler_xyz(q) -> np.ndarray:
+    """A quaternion (wxyz) as the XYZ Euler angles `pd_ee_pose` takes for its target orientation."""
+    rot = rotation_conversions.quaternion_to_matrix(torch.as_tensor(np.asarray(q), dtype=torch.float64))
+    return _np(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))
+
+
 class ManiSkillPlatform:
     """One ManiSkill env for one task, kept alive across many rollouts."""
 
@@ -263,9 +269,7 @@ class ManiSkillPlatform:
         q[:7] = joint_action[:7]
         self._pin.compute_forward_kinematics(q)
         pose = self._pin.get_link_pose(self._tcp_index)  # relative to the articulation root (robot base)
-        rot = rotation_conversions.quaternion_to_matrix(torch.as_tensor(pose.q, dtype=torch.float64))
-        euler = _np(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))  # pd_ee_pose's convention
-        return np.array([*pose.p, *euler, joint_action[7]], dtype=np.float32)
+        return np.array([*pose.p, *euler_xyz(pose.q), joint_action[7]], dtype=np.float32)
 
     # -- replay -----------------------------------------------------------------------------------
     def replay(self, seed: int, actions: np.ndarray, placements: dict[str, np.ndarray] | None = None) -> Rollout:

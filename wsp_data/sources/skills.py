@@ -15,7 +15,7 @@ import sapien
 import torch
 
 from wsp_data.platforms.maniskill import (
-    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, _np, rotation_conversions,
+    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, _np, euler_xyz,
 )
 
 STEP_M = 0.012  # TCP translation per control step (0.24 m/s at 20 Hz)
@@ -68,9 +68,7 @@ class SkillScript:
     # -- primitive step -------------------------------------------------------------------------
     def _command(self, target: sapien.Pose) -> None:
         rel = self.u.agent.robot.pose.sp.inv() * target
-        rot = rotation_conversions.quaternion_to_matrix(torch.as_tensor(rel.q, dtype=torch.float64))
-        euler = _np(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))
-        cmd = np.array([*rel.p, *euler, self.grip], dtype=np.float32)
+        cmd = np.array([*rel.p, *euler_xyz(rel.q), self.grip], dtype=np.float32)
         self.platform.env.step(torch.as_tensor(cmd)[None])
         q = _np(self.u.agent.controller.controllers["arm"]._target_qpos[0])
         self.actions.append(np.array([*q, self.grip], dtype=np.float32))
