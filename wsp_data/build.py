@@ -43,6 +43,7 @@ class BuildResult:
     seconds: float
     rendered_steps: int
     report: dict | None = None
+    up_to_date: bool = False  # the config was already assembled from this very build config
 
 
 # -- output folder checks ------------------------------------------------------------------------------
@@ -131,8 +132,7 @@ def _worker_decide(slot: int) -> SlotRecord:
     return decide_slot(_WORKER["builder"], _WORKER["staging"], slot)
 
 
-def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, progress: bool
-               ) -> Iterator[SlotRecord]:
+def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int) -> Iterator[SlotRecord]:
     if workers <= 1 or len(slots) <= 1:
         builder = builder_class(config.suite)(config)
         try:
@@ -234,13 +234,13 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
     if (out / RELEASE_JSON).exists() and not (out / STAGING_DIR / config.name).exists() and not restart:
         existing = load_release(out)["configs"].get(config.name)
         if existing and existing["build_config"] == config.to_json() and (out / config.name).exists():
-            return BuildResult(config, out, 0, 0, 0, False, 0.0, 0)
+            return BuildResult(config, out, 0, 0, 0, False, 0.0, 0, up_to_date=True)
     staging = _open_staging(out, config, restart)
     t0 = time.perf_counter()
     todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
     decided = kept = steps = 0
     bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="inst", disable=not progress, file=sys.stderr)
-    for record in _run_slots(config, staging, todo, workers, progress):
+    for record in _run_slots(config, staging, todo, workers):
         decided += 1
         kept += record.kept
         steps += sum(a["rendered_steps"] for a in record.attempts)

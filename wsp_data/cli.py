@@ -95,7 +95,7 @@ def cmd_build(args) -> int:
                        progress=not args.quiet)
     except (BuildError, ValueError) as e:
         raise CliError(str(e)) from None
-    if result.seconds == 0 and not result.assembled:
+    if result.up_to_date:
         print(f"{config.name} in {result.release} is up to date (same build config); nothing to do")
         return 0
     per = result.seconds / max(1, result.rendered_steps) * 1000
