@@ -20,12 +20,13 @@ TINY = dict(suite="t1", platform="maniskill", count=4, tasks=("PickCube", "PushC
 TINY_ARGS = {k: v for k, v in TINY.items() if k != "platform"}
 
 
-def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], **config) -> Path:
-    """Build one config of a tiny real release into a fresh folder named `worldsimprobe`."""
+def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], out: Path | None = None,
+               **config) -> Path:
+    """Build one config of a tiny real release into `out` (default: a fresh folder named `worldsimprobe`)."""
     from wsp_data.build import build
     from wsp_data.builders import BuildConfig
 
-    out = tmp_path_factory.mktemp(suite) / "worldsimprobe"
+    out = out or tmp_path_factory.mktemp(suite) / "worldsimprobe"
     result = build(BuildConfig(suite, "maniskill", count, tuple(tasks), **config), out, progress=False)
     assert result.assembled
     return out
@@ -45,9 +46,35 @@ def open_lerobot(release: Path, config: str):
     return LeRobotDataset(f"worldsimprobe/{config}", root=release / config)
 
 
+def assert_source_episodes(ds, rows) -> None:
+    """Every instance has one unscored source episode (the unperturbed expert rollout, same task and scene
+    seed, successful) besides its scored ones, and nothing else."""
+    assert ds.num_episodes == sum(len(r["episode_indices"]) + 1 for r in rows)
+    for r in rows:
+        ep = ds.meta.episodes[r["source_episode_index"]]
+        assert r["source_episode_index"] not in r["episode_indices"]
+        assert r["source_episode_id"] == ep["wsp.episode_id"] == f"episode_{r['source_episode_index']:06d}"
+        assert ep["wsp.role"] == "source" and ep["wsp.instance_id"] == r["instance_id"]
+        assert ep["wsp.task"] == r["task"] and ep["wsp.seed"] == r["seed"] and ep["wsp.success"]
+        assert ep["wsp.intervention"] == "{}"
+
+
 @pytest.fixture(scope="session")
 def t1_release(tmp_path_factory) -> Path:
     """A real 4-instance T1 release folder named `worldsimprobe`."""
     out = build_tiny(tmp_path_factory, **TINY_ARGS)
     assert json.loads((out / "t1_maniskill" / "build_report.json").read_text())["kept"] >= 3
+    return out
+
+
+T2_TASKS = ("PickCube", "PushCube", "PullCube")
+
+
+@pytest.fixture(scope="session")
+def suites_release(tmp_path_factory) -> Path:
+    """One real release holding tiny T2 (3 replays over T2_TASKS), T4 (6, PickCube: two of each kind) and T5
+    (8, PickCube: one per primitive) configs, each with its source rollouts."""
+    out = tmp_path_factory.mktemp("suites") / "worldsimprobe"
+    for suite, count, tasks in (("t2", 3, T2_TASKS), ("t4", 6, ("PickCube",)), ("t5", 8, ("PickCube",))):
+        build_tiny(tmp_path_factory, suite, count, tasks, out=out)
     return out

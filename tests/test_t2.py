@@ -8,7 +8,8 @@ import json
 
 import numpy as np
 import pytest
-from conftest import build_tiny, instance_rows, open_lerobot
+from conftest import T2_TASKS as TASKS
+from conftest import assert_source_episodes, instance_rows, open_lerobot
 
 from wsp_data.builders.t2 import (
     BLOCK_STEPS, MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
@@ -16,12 +17,11 @@ from wsp_data.builders.t2 import (
 )
 from wsp_data.schema import FPS, MASK_KEY, MAX_OBJECTS, SEED_BASE, VIDEO_KEY
 
-TASKS = ("PickCube", "PushCube", "PullCube")
 
 
 @pytest.fixture(scope="module")
-def release(tmp_path_factory):
-    return build_tiny(tmp_path_factory, "t2", 3, TASKS)
+def release(suites_release):
+    return suites_release
 
 
 @pytest.fixture(scope="module")
@@ -33,7 +33,7 @@ def rows(release):
 def episodes(release, rows):
     """Per instance, its reference episode as arrays decoded from the LeRobot dataset."""
     ds = open_lerobot(release, "t2_maniskill")
-    assert ds.num_episodes == len(rows)
+    assert_source_episodes(ds, rows)
     out = []
     for r in rows:
         (idx,) = r["episode_indices"]

@@ -10,7 +10,7 @@ from collections import Counter
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from conftest import build_tiny, instance_rows, open_lerobot
+from conftest import assert_source_episodes, instance_rows, open_lerobot
 
 from wsp_data.schema import INSTANCES, MASK_KEY, VIDEO_KEY
 
@@ -22,8 +22,8 @@ CLEAR_M = 0.04  # distractor centre ≥ 4 cm from every task object's centre (2 
 
 
 @pytest.fixture(scope="module")
-def release(tmp_path_factory):
-    return build_tiny(tmp_path_factory, "t4", 6, ("PickCube",))
+def release(suites_release):
+    return suites_release
 
 
 @pytest.fixture(scope="module")
@@ -67,6 +67,10 @@ def test_every_kind_appears_balanced(rows, release):
     assert rows["kind"] == rows["group"]
     assert set(report["per_group"]) == set(KINDS)
     assert pq.read_table(release / "t4_maniskill" / INSTANCES).num_rows == len(rows) == report["kept"]
+
+
+def test_every_instance_keeps_its_source_rollout(ds, rows):
+    assert_source_episodes(ds, rows)
 
 
 def test_rows_hold_the_scoring_fields(rows):

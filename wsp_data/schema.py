@@ -72,6 +72,8 @@ def frame_features() -> dict:
 
 
 # Episode-level columns appended to LeRobot's meta/episodes table (readable as ds.meta.episodes[i][...]).
+SOURCE_ROLE = "source"  # an instance's unscored, unperturbed source rollout (action-blind baseline, paired training data)
+
 EPISODE_COLUMNS = (
     "wsp.episode_id", "wsp.instance_id", "wsp.suite", "wsp.platform", "wsp.task", "wsp.seed", "wsp.role",
     "wsp.source", "wsp.intervention", "wsp.objects", "wsp.camera_intrinsic", "wsp.camera_extrinsic",

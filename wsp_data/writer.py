@@ -21,7 +21,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from wsp_data.schema import (
-    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, VIDEO_KEY, frame_features,
+    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, SOURCE_ROLE, VIDEO_KEY, frame_features,
 )
 from wsp_data.staging import RolloutArrays, SlotRecord
 
@@ -82,13 +82,17 @@ def write_config(config_dir: Path, config: str, platform: str,
                 "wsp.camera_extrinsic": r.extrinsic.reshape(-1).astype(float).tolist(),
                 "wsp.success": bool(r.success[-1]), "wsp.num_frames": int(r.num_frames),
             })
+        scored = [(r, i) for r, i in zip(rollouts, indices) if r.role != SOURCE_ROLE]
         row.update(
-            roles=[r.role for r in rollouts], episode_indices=indices,
-            episode_ids=[EPISODE_ID.format(index=i) for i in indices],
-            num_frames=[int(r.num_frames) for r in rollouts], success=[bool(r.success[-1]) for r in rollouts],
-            fps=info.fps, camera_intrinsic=rollouts[0].intrinsic.reshape(-1).astype(float).tolist(),
-            camera_extrinsic=rollouts[0].extrinsic.reshape(-1).astype(float).tolist(),
+            roles=[r.role for r, _ in scored], episode_indices=[i for _, i in scored],
+            episode_ids=[EPISODE_ID.format(index=i) for _, i in scored],
+            num_frames=[int(r.num_frames) for r, _ in scored], success=[bool(r.success[-1]) for r, _ in scored],
+            fps=info.fps, camera_intrinsic=scored[0][0].intrinsic.reshape(-1).astype(float).tolist(),
+            camera_extrinsic=scored[0][0].extrinsic.reshape(-1).astype(float).tolist(),
         )
+        source = [i for r, i in zip(rollouts, indices) if r.role == SOURCE_ROLE]
+        if source:
+            row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
         instance_rows.append(row)
     ds.finalize()
     _drop_fingerprints(tmp)

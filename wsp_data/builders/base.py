@@ -103,7 +103,9 @@ class SuiteBuilder(ABC):
     """One suite on one platform.
 
     Roles:
-        `roles`: the rollouts of one instance, in order (e.g. original, small, large).
+        `roles`: the scored rollouts of one instance, in order (e.g. original, small, large). A suite may
+        append one unscored rollout of role `SOURCE_ROLE`: the unperturbed source (instance columns
+        `source_episode_index` / `source_episode_id`; the action-blind baseline plays it back).
     Hooks:
         `plan(slot)`: the slot's task (and group); default balances slots over the config's tasks.
         `attempt(plan, seed, rng)`: propose, execute (unrendered first), validate, render what passed.

@@ -20,7 +20,7 @@ from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBu
 from wsp_data.builders.rig import RigCache
 from wsp_data.builders.validity import MAX_JOINT_SPEED, check_rollout
 from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
-from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN
+from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
 from wsp_data.sources.experts import ExpertSource, task_spec
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
@@ -173,6 +173,11 @@ class T2Builder(SuiteBuilder):
         active = active_pixels_per_window(*reference_flows(ro.stack("rgb"), ro.stack("mask"), FPS))
         if not (active > 0).any():
             return Dropped("no_scorable_motion", steps, simulated, {"donor_task": donor_task})
+        own = receiver.expert.trajectory(seed)  # the unperturbed source: the receiver's own expert
+        if own is None:
+            return Dropped("source_failed", steps, simulated, {"donor_task": donor_task})
+        src = receiver.render.replay(seed, own)
+        steps += len(own)
         row = {
             "task": plan.task, "seed": seed, "instruction": receiver.spec.instruction,
             "objects": list(receiver.spec.objects), "source": f"scripted_expert (donor: {donor_task})",
@@ -180,4 +185,5 @@ class T2Builder(SuiteBuilder):
             "active_windows": int((active > 0).sum()), "num_windows": len(active),
             "interventions": {"reference": {"donor_task": donor_task, "donor_seed": donor_seed}},
         }
-        return Kept(row, [RolloutArrays.from_rollout("reference", ro)], steps, simulated)
+        return Kept(row, [RolloutArrays.from_rollout("reference", ro), RolloutArrays.from_rollout(SOURCE_ROLE, src)],
+                    steps, simulated)

@@ -27,7 +27,7 @@ from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBu
 from wsp_data.builders.rig import RigCache
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import GRIPPER_OPEN, ExtraActor, ManiSkillPlatform, Rollout, _np
-from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN
+from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
 from wsp_data.sources.experts import ExpertSource, task_spec
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
@@ -315,4 +315,6 @@ class T4Builder(SuiteBuilder):
             "displacement_reference": score.displacement, "object_visible_fraction": motion.visible_fraction,
             "interventions": {"reference": proposal.params},
         }
-        return Kept(row, [RolloutArrays.from_rollout("reference", ref)], rendered, simulated)
+        src = rig.replay(rig.render, seed, original)  # the unperturbed source rollout
+        return Kept(row, [RolloutArrays.from_rollout("reference", ref), RolloutArrays.from_rollout(SOURCE_ROLE, src)],
+                    rendered + len(source), simulated)

@@ -21,7 +21,7 @@ from wsp_data.builders.rig import RigCache
 from wsp_data.builders.t5_rules import MOTION_ONSET, PRIMITIVES, check
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform, Rollout, _np
-from wsp_data.schema import IMAGE_SIZE
+from wsp_data.schema import IMAGE_SIZE, SOURCE_ROLE
 from wsp_data.sources.experts import task_spec
 from wsp_data.sources.primitives import PROPS, SCRIPTS, BranchScript, prop_placement
 from wsp_data.staging import RolloutArrays
@@ -168,7 +168,9 @@ class T5Builder(SuiteBuilder):
                                                            rendered.extrinsic, IMAGE_SIZE)],
             **measured, "interventions": {"reference": parameters},
         }
-        return Kept(row, [RolloutArrays.from_rollout("reference", rendered)], steps, simulated)
+        src = rig.render.replay(seed, source, placements)  # the unperturbed source: the expert, no primitive
+        return Kept(row, [RolloutArrays.from_rollout("reference", rendered),
+                          RolloutArrays.from_rollout(SOURCE_ROLE, src)], steps + len(source), simulated)
 
     @staticmethod
     def reject(rig: _Rig, ro: Rollout, primitive: str, ev: int) -> str | None:
