@@ -181,6 +181,24 @@ def test_score_passes_a_faithful_video_and_fails_a_moved_object():
     assert s.gate_passed and s.displacement == pytest.approx(20.0, abs=0.5) and s.score == 0.0
 
 
+def test_an_object_that_vanishes_is_a_tracking_failure():
+    """The object is in frame 0 only (a model that dropped it, or carried it off under the fingers): its
+    points are visible in 1 of 21 frames, the centroid is carried forward (d = 0), and the gate passes. With
+    the reference visible in every frame, 1/21 < TRACKED_RATIO·1.0 → tracking failure → S = 0; without the
+    reference fraction (the builder's own check) the rule is off and the carried centroid scores 100."""
+    n = 21
+    mask = hand_mask()
+    g_ref = tr.motion_gate(scene(n), mask)
+    gone = scene(n)
+    gone[1:] = video(n, [(HAND, lambda t: hand_at(t, n))])[1:]  # the same scene without the object after frame 0
+    s = tr.t4_score(gone, np.array(OBJ_AT, float), mask, g_ref, visible_reference=1.0)
+    assert s.gate_passed and s.displacement < 0.05
+    assert s.visible_fraction == pytest.approx(1 / n) and not s.tracked and s.score == 0.0
+    assert tr.t4_score(gone, np.array(OBJ_AT, float), mask, g_ref).score == 100.0
+    faithful = tr.t4_score(scene(n), np.array(OBJ_AT, float), mask, g_ref, visible_reference=1.0)
+    assert faithful.tracked and faithful.score == 100.0
+
+
 def test_half_speed_arm_passes_the_gate_and_less_fails():
     """The gate is relative: a hand that covers 60% of the reference path passes, 40% fails."""
     n = 21

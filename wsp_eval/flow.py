@@ -4,7 +4,8 @@ Pipeline for one video (reference or generated) over a duration T (the common du
 1. Sample at `EVAL_FPS` = 5 Hz: times t_k = k / 5 for every k with t_k ≤ T (t_0 = 0), each taking the
    nearest frame by timestamp (`wsp_eval.video`). A video of n frames at `fps` lasts (n − 1) / fps.
 2. Resize to `FLOW_SIZE` = 160×120 (RGB bilinear, then grey; label masks nearest-neighbour).
-3. Flow k = OpenCV DIS (preset MEDIUM, one thread) from sample k to sample k + 1: K = len(samples) − 1
+3. Flow k = the flow backend's (default OpenCV DIS, preset MEDIUM, one thread; `wsp_eval.backends.flow`)
+   from sample k to sample k + 1: K = len(samples) − 1
    fields, each (120, 160, 2) in pixels of the 160×120 grid. The reference's robot mask of flow k is the
    union of the robot masks (label > 0) at samples k and k + 1.
 4. Windows (`windows`): 2 s long, 1 s stride = `WINDOW_FLOWS` = 10 consecutive flows starting every
@@ -25,6 +26,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from wsp_eval.backends.flow import DISFlow
 from wsp_eval.video import nearest_indices, timestamps
 
 EVAL_FPS = 5.0  # Hz: the RMFA timebase (flows span 0.2 s)
@@ -33,7 +35,6 @@ WINDOW_FLOWS = 10  # flows per window (2 s at 5 Hz)
 STRIDE_FLOWS = 5  # window stride in flows (1 s at 5 Hz)
 TAU = 0.25  # px: reference flow magnitude above which a robot pixel is active
 C = 3.16  # px: floor of the normaliser R (limits sensitivity to low-motion flow noise)
-DIS_PRESET = cv2.DISOPTICAL_FLOW_PRESET_MEDIUM
 
 
 class ReferenceFlows(NamedTuple):
@@ -70,11 +71,10 @@ def _sample_indices(num_frames: int, fps: float, duration: float | None) -> np.n
     return nearest_indices(timestamps(num_frames, fps), times)
 
 
-def _grey_grid(frames: np.ndarray) -> np.ndarray:
+def _rgb_grid(frames: np.ndarray) -> np.ndarray:
     if frames.dtype != np.uint8 or frames.ndim != 4 or frames.shape[-1] != 3:
         raise ValueError(f"expected (T, H, W, 3) uint8 RGB frames, got {frames.dtype} {frames.shape}")
-    return np.stack([cv2.cvtColor(cv2.resize(f, FLOW_SIZE, interpolation=cv2.INTER_LINEAR), cv2.COLOR_RGB2GRAY)
-                     for f in frames])
+    return np.stack([cv2.resize(f, FLOW_SIZE, interpolation=cv2.INTER_LINEAR) for f in frames])
 
 
 def _robot_grid(labels: np.ndarray) -> np.ndarray:
@@ -85,31 +85,22 @@ def _robot_grid(labels: np.ndarray) -> np.ndarray:
     return np.stack([cv2.resize(m, FLOW_SIZE, interpolation=cv2.INTER_NEAREST) for m in robot]).astype(bool)
 
 
-def _dis_flows(grey: np.ndarray) -> np.ndarray:
-    cv2.setNumThreads(1)
-    dis = cv2.DISOpticalFlow_create(DIS_PRESET)
-    out = np.zeros((max(len(grey) - 1, 0), FLOW_SIZE[1], FLOW_SIZE[0], 2), dtype=np.float32)
-    for k in range(len(out)):
-        out[k] = dis.calc(grey[k], grey[k + 1], None)
-    return out
-
-
-def video_flows(video: np.ndarray, fps: float, duration: float | None = None) -> np.ndarray:
-    """(K, 120, 160, 2) DIS flows of a (T, H, W, 3) uint8 RGB video sampled at 5 Hz over `duration`
-    seconds (default: the whole clip). Used for both the reference and a generated video."""
+def video_flows(video: np.ndarray, fps: float, duration: float | None = None, backend=None) -> np.ndarray:
+    """(K, 120, 160, 2) flows of a (T, H, W, 3) uint8 RGB video sampled at 5 Hz over `duration` seconds
+    (default: the whole clip), by `backend` (default DIS). Used for both the reference and a generated video."""
     idx = _sample_indices(len(video), fps, duration)
-    return _dis_flows(_grey_grid(np.asarray(video)[idx]))
+    return (backend or DISFlow()).flows(_rgb_grid(np.asarray(video)[idx]))
 
 
-def reference_flows(video: np.ndarray, labels: np.ndarray, fps: float, duration: float | None = None
-                    ) -> ReferenceFlows:
+def reference_flows(video: np.ndarray, labels: np.ndarray, fps: float, duration: float | None = None,
+                    backend=None) -> ReferenceFlows:
     """Reference flows and per-pair robot masks. `labels`: (T, H, W) integer masks aligned with `video`
     (0 not robot, 1 arm, 2 wrist/hand/fingers; robot = label > 0)."""
     if len(labels) != len(video):
         raise ValueError(f"{len(labels)} masks for {len(video)} frames")
     idx = _sample_indices(len(video), fps, duration)
     robot = _robot_grid(np.asarray(labels)[idx])
-    return ReferenceFlows(_dis_flows(_grey_grid(np.asarray(video)[idx])), robot[:-1] | robot[1:])
+    return ReferenceFlows((backend or DISFlow()).flows(_rgb_grid(np.asarray(video)[idx])), robot[:-1] | robot[1:])
 
 
 def windows(num_flows: int) -> list[tuple[int, int]]:

@@ -24,6 +24,7 @@ it); with no visible point it carries its last value forward.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -46,6 +47,11 @@ ERR_MAX = 12.0  # grey levels: mean absolute difference to the frame-0 window ab
 MOTION_MAX = 10.0  # px: d above this means the object moved (S = 0)
 GATE_RATIO = 0.5  # the generated gate must reach this fraction of the reference gate
 GATE_MIN_REFERENCE = 20.0  # px: build time keeps an instance only if the reference gate reaches this
+TRACKED_RATIO = 0.5  # a generated rollout whose object is visible in fewer than this fraction of the frames in
+#   which the reference's is visible is a tracking failure (S = 0; SPEC §3 T4 counts tracking failures in the
+#   mean). Without it an object that vanishes, or is carried away under the fingers, would keep its last
+#   centroid and pass: measured, the action-blind baseline (the source rollout: no distractor, target grasped
+#   or still at its original place) scored 75 on T4 without the rule.
 ARM_GRID_STEP = 4  # px: spacing of the distal-arm seed grid
 ARM_ERODE = 2  # px: the distal-arm mask is eroded by this before seeding (no points on its outline)
 DISTAL_LABEL = 2  # robot mask label of wrist, hand and fingers
@@ -193,9 +199,12 @@ class ObjectMotion:
     textured_points: int
 
 
-def object_motion(grey: np.ndarray, object_px: np.ndarray) -> ObjectMotion:
+TrackFn = Callable[..., "Tracks"]  # (video, points, *, anchored) -> Tracks: `track` or a backend's
+
+
+def object_motion(grey: np.ndarray, object_px: np.ndarray, track_fn: TrackFn | None = None) -> ObjectMotion:
     """d = max over frames of ‖centroid_t − centroid_0‖ for the 3×3 grid around `object_px` (anchored)."""
-    tracks = track(grey, query_grid(object_px), anchored=True)
+    tracks = (track_fn or track)(grey, query_grid(object_px), anchored=True)
     c = centroid_path(tracks, anchored=True)
     d = float(np.linalg.norm(c - c[0], axis=1).max())
     return ObjectMotion(d, float(tracks.visible.any(axis=1).mean()), int(tracks.visible[0].sum()))
@@ -206,11 +215,11 @@ def gate_frames(num_frames: int) -> tuple[int, int, int]:
     return 0, (num_frames - 1) // 2, num_frames - 1
 
 
-def motion_gate(grey: np.ndarray, reference_mask0: np.ndarray) -> float:
+def motion_gate(grey: np.ndarray, reference_mask0: np.ndarray, track_fn: TrackFn | None = None) -> float:
     """g = max pairwise distance, over the gate frames, of the distal-arm centroid tracked (chained) from a
     grid seeded at frame 0 on the reference mask's label 2. No seed point or no texture: g = 0."""
     seeds = arm_grid(reference_mask0)
-    tracks = track(grey, seeds, anchored=False)
+    tracks = (track_fn or track)(grey, seeds, anchored=False)
     if not tracks.visible[0].any():
         return 0.0
     c = centroid_path(tracks, anchored=False)[list(gate_frames(len(grey)))]
@@ -225,17 +234,25 @@ class T4Score:
     displacement: float
     gate: float
     gate_passed: bool
+    visible_fraction: float
+    tracked: bool
 
 
 def t4_score(frames: np.ndarray, object_px: np.ndarray, reference_mask0: np.ndarray,
-             gate_reference: float) -> T4Score:
-    """S = 100·1[g ≥ GATE_RATIO·g_ref]·1[d ≤ MOTION_MAX] for one video (any size; resized to 256²).
+             gate_reference: float, visible_reference: float | None = None, tracker=None) -> T4Score:
+    """S = 100·1[g ≥ GATE_RATIO·g_ref]·1[tracked]·1[d ≤ MOTION_MAX] for one video (any size; resized to 256²).
     `object_px`: the evaluated object's frame-0 position in the scoring frame; `reference_mask0`: the
-    reference robot label mask at frame 0; `gate_reference`: g of the reference (stored per instance)."""
+    reference robot label mask at frame 0; `gate_reference`: g of the reference (stored per instance);
+    `visible_reference`: the fraction of reference frames in which the object is visible (stored per instance;
+    None skips the tracking-failure rule, as the builder does on the reference itself); `tracker`: a tracker
+    backend (`wsp_eval.backends.tracker`; default this module's Lucas–Kanade)."""
     if not gate_reference > 0:
         raise ValueError(f"gate_reference must be positive, got {gate_reference}")
-    grey = scoring_frames(frames)
-    d = object_motion(grey, object_px).displacement
-    g = motion_gate(grey, reference_mask0)
+    video = tracker.prepare(frames) if tracker else scoring_frames(frames)
+    fn = tracker.track if tracker else track
+    motion = object_motion(video, object_px, fn)
+    g = motion_gate(video, reference_mask0, fn)
     passed = g >= GATE_RATIO * gate_reference
-    return T4Score(100.0 * (passed and d <= MOTION_MAX), d, g, bool(passed))
+    tracked = visible_reference is None or motion.visible_fraction >= TRACKED_RATIO * visible_reference
+    ok = passed and tracked and motion.displacement <= MOTION_MAX
+    return T4Score(100.0 * ok, motion.displacement, g, bool(passed), motion.visible_fraction, bool(tracked))

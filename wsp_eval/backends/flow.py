@@ -1,0 +1,73 @@
+"""Optical-flow backends for RMFA (SPEC §4): OpenCV DIS (default, CPU, no weights) and DPFlow through
+ptlflow with a local checkpoint (optional). A backend maps RGB samples on the 160×120 grid to the flows
+between consecutive samples, in pixels of that grid."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from wsp_eval.backends.errors import BackendUnavailable
+
+
+class DISFlow:
+    """OpenCV DIS optical flow, preset MEDIUM, one thread per worker (the default backend)."""
+
+    name = "dis"
+
+    def __init__(self):
+        self.version = f"opencv {cv2.__version__} DIS preset MEDIUM"
+
+    def flows(self, samples: np.ndarray) -> np.ndarray:
+        """(K+1, H, W, 3) uint8 RGB → (K, H, W, 2) float32 flows from sample k to k + 1."""
+        cv2.setNumThreads(1)
+        dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+        grey = [cv2.cvtColor(s, cv2.COLOR_RGB2GRAY) for s in samples]
+        out = np.zeros((max(len(samples) - 1, 0), *samples.shape[1:3], 2), np.float32)
+        for k in range(len(out)):
+            out[k] = dis.calc(grey[k], grey[k + 1], None)
+        return out
+
+
+class DPFlow:
+    """DPFlow (the paper's flow model, `things` weights) through ptlflow, from a local checkpoint file.
+
+    Needs `pip install ptlflow` and a checkpoint already on disk; nothing is downloaded. Runs on CUDA when
+    available, else on the CPU (slow)."""
+
+    name = "dpflow"
+
+    def __init__(self, checkpoint: str | Path | None = None, device: str | None = None):
+        if checkpoint is None:
+            raise BackendUnavailable("flow backend 'dpflow' needs a local checkpoint: --flow-checkpoint PATH "
+                                     "(e.g. dpflow-things.ckpt from ptlflow's model zoo, downloaded beforehand)")
+        path = Path(checkpoint)
+        if not path.is_file():
+            raise BackendUnavailable(f"flow backend 'dpflow': checkpoint {path} not found (nothing is downloaded "
+                                     "at run time; fetch it once and pass its path)")
+        try:
+            import ptlflow
+            import torch
+            from ptlflow.utils.io_adapter import IOAdapter
+        except ImportError as e:
+            raise BackendUnavailable(f"flow backend 'dpflow' needs ptlflow ({e}); install it with "
+                                     "`pip install ptlflow` or use the default backend 'dis'") from None
+        self._torch, self._adapter_cls = torch, IOAdapter
+        self._device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        self._model = ptlflow.get_model("dpflow", ckpt_path=str(path)).eval().to(self._device)
+        self.version = f"ptlflow {getattr(ptlflow, '__version__', '?')} dpflow {path.name}"
+
+    def flows(self, samples: np.ndarray) -> np.ndarray:
+        if len(samples) < 2:
+            return np.zeros((0, *samples.shape[1:3], 2), np.float32)
+        adapter = self._adapter_cls(self._model, samples.shape[1:3])
+        out = []
+        with self._torch.no_grad():
+            for k in range(len(samples) - 1):
+                inputs = adapter.prepare_inputs([samples[k], samples[k + 1]])
+                inputs = {key: v.to(self._device) for key, v in inputs.items()}
+                preds = adapter.unscale(self._model(inputs))
+                out.append(preds["flows"][0, 0].permute(1, 2, 0).cpu().numpy())
+        return np.stack(out).astype(np.float32)
