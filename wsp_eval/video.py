@@ -60,16 +60,17 @@ def read_video(path) -> tuple[np.ndarray, float]:
 
 
 def write_video(path, frames: np.ndarray, fps: float) -> None:
-    """Write RGB uint8 frames (N, H, W, 3) as near-lossless h264 (yuv444p, crf 0) mp4."""
+    """Write RGB uint8 frames (N, H, W, 3) as lossless RGB h264 (libx264rgb, crf 0) mp4: decoding gives back
+    exactly these frames, so a baseline or a model run through `wsp generate` is scored on what it produced."""
     import av
 
     frames = np.asarray(frames, dtype=np.uint8)
     if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
         raise VideoError(f"{path}: expected frames of shape (N, H, W, 3), got {frames.shape}")
     with av.open(str(path), "w") as container:
-        stream = container.add_stream("libx264", rate=int(round(fps)))
+        stream = container.add_stream("libx264rgb", rate=int(round(fps)))
         stream.width, stream.height = frames.shape[2], frames.shape[1]
-        stream.pix_fmt = "yuv444p"
+        stream.pix_fmt = "rgb24"
         stream.options = {"crf": "0", "preset": "medium", "threads": "1"}
         for frame in frames:
             for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):

@@ -1,0 +1,211 @@
+"""Run a world model over a release and write a submission (DESIGN "Submission layout").
+
+A model is any callable `model(first_frame, actions, fps, seed) -> frames`: `first_frame` is the reference
+frame 0 (H, W, 3) uint8, `actions` the episode's action stream float32 (T, D) (column `action`, or
+`action.ee`), `fps` the release's frame rate and `seed` the generation seed; it returns (N, H, W, 3) frames
+(uint8, or numbers in [0, 255]), N the episode's reference horizon. `load_model("module:callable")` finds one.
+
+`write_submission` is the loop shared with the calibration baselines: each video is written to a temp name
+in its folder and renamed into place, so a killed run never leaves a truncated mp4, and the same call run
+again skips the videos already there. submission.json is rewritten after every video; its
+`generation_seconds` (time spent producing frames: the model call and reading its inputs) accumulates over
+resumed runs.
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib
+import json
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+from tqdm import tqdm
+
+import wsp_data
+from wsp_data.schema import INSTANCES
+from wsp_eval.baselines import EpisodeContext
+from wsp_eval.submission import SUBMISSION_JSON, VIDEO_NAME, test_configs
+from wsp_eval.video import write_video
+
+Model = Callable[[np.ndarray, np.ndarray, float, int], np.ndarray]
+Producer = Callable[[EpisodeContext], np.ndarray]
+
+
+class GenerateError(RuntimeError):
+    """A model, its output, or an output folder that cannot be used; the message names which and where."""
+
+
+@dataclass(frozen=True)
+class GenerateResult:
+    written: int  # videos written by this call
+    skipped: int  # videos already present (resumed)
+    seconds: float  # spent producing frames in this call
+
+
+def load_model(spec: str) -> Model:
+    """The callable named by "module:callable" (the attribute may be dotted: "module:Class.method"). The
+    current directory is put on the module search path (as `python -m` does), so a model file there imports."""
+    module_name, sep, attr = spec.partition(":")
+    if not (sep and module_name and attr):
+        raise GenerateError(f"model {spec!r}: expected 'module:callable'")
+    if os.getcwd() not in sys.path and "" not in sys.path:
+        sys.path.insert(0, os.getcwd())
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as e:
+        raise GenerateError(f"model {spec!r}: cannot import module {module_name!r} ({e})") from e
+    try:
+        obj = functools.reduce(getattr, attr.split("."), module)
+    except AttributeError:
+        raise GenerateError(f"model {spec!r}: module {module_name!r} has no attribute {attr!r}") from None
+    if not callable(obj):
+        raise GenerateError(f"model {spec!r}: {attr!r} is a {type(obj).__name__}, not callable")
+    return obj
+
+
+def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (0, 1, 2),
+             configs: Sequence[str] | None = None, name: str, action_key: str = "action",
+             progress: bool = True) -> GenerateResult:
+    """Run `model` on every scored episode × seed of `release` (or of `configs`) and write, or resume, the
+    submission of model `name` in `out`."""
+    def produce(ctx: EpisodeContext) -> np.ndarray:
+        try:
+            actions = ctx.actions(action_key)
+        except ValueError as e:
+            raise GenerateError(str(e)) from None
+        return model(ctx.frames()[0].copy(), actions.copy(), ctx.fps, ctx.seed)
+
+    return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress)
+
+
+def write_submission(produce: Producer, release: Path, out: Path, *, seeds: Sequence[int],
+                     configs: Sequence[str] | None = None, name: str, progress: bool) -> GenerateResult:
+    """Write `produce(ctx)` for every scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`,
+    skipping videos already there, then submission.json."""
+    release, out = Path(release), Path(out)
+    seeds, configs = _check_seeds(seeds), _check_configs(release, configs)
+    if not isinstance(name, str) or not name:
+        raise GenerateError(f"model name must be a non-empty string, got {name!r}")
+    before = _previous_seconds(out, name)
+    written = skipped = 0
+    seconds = 0.0
+    total = len(seeds) * sum(len(ids) for c in configs for ids in _column(release, c, "episode_ids"))
+    with tqdm(total=total, desc=name, unit="video", disable=not progress, file=sys.stderr) as bar:
+        for ctx in _episodes(release, configs, seeds[0]):
+            for seed in seeds:
+                path = out / ctx.config / ctx.episode_id / VIDEO_NAME.format(seed=seed)
+                if path.exists():
+                    skipped += 1
+                else:
+                    seconds += _write_one(produce, replace(ctx, seed=seed), path)
+                    written += 1
+                    _write_manifest(out, name, seeds, configs, before + seconds)
+                bar.update()
+    _write_manifest(out, name, seeds, configs, before + seconds)
+    return GenerateResult(written, skipped, seconds)
+
+
+def check_frames(frames: object, num_frames: int, where: str) -> np.ndarray:
+    """`frames` as (num_frames, H, W, 3) uint8, or a GenerateError naming `where` and what is wrong."""
+    try:
+        arr = np.asarray(frames)
+    except (TypeError, ValueError, RuntimeError) as e:
+        raise GenerateError(f"{where}: the model returned a {type(frames).__name__}, not an array ({e})") from None
+    if arr.dtype.kind not in "uif":
+        raise GenerateError(f"{where}: frames of dtype {arr.dtype}; expected uint8 (or numbers in [0, 255])")
+    if arr.ndim != 4 or arr.shape[-1] != 3 or 0 in arr.shape[1:3]:
+        raise GenerateError(f"{where}: frames of shape {arr.shape}; expected (N, H, W, 3)")
+    if len(arr) != num_frames:
+        raise GenerateError(f"{where}: {len(arr)} frames; the reference horizon is {num_frames}")
+    if arr.dtype == np.uint8:
+        return arr
+    if not np.isfinite(arr).all():
+        raise GenerateError(f"{where}: frames contain NaN or infinite values")
+    lo, hi = arr.min(), arr.max()
+    if lo < 0 or hi > 255:
+        raise GenerateError(f"{where}: values span [{lo}, {hi}], outside [0, 255]")
+    return np.rint(arr).astype(np.uint8)
+
+
+def _write_one(produce: Producer, ctx: EpisodeContext, path: Path) -> float:
+    """Produce, check and atomically write one video; returns the seconds spent producing it."""
+    where = f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}"
+    start = time.perf_counter()
+    try:
+        frames = produce(ctx)
+    except Exception as e:
+        e.add_note(f"while generating {where}")
+        raise
+    seconds = time.perf_counter() - start
+    frames = check_frames(frames, ctx.num_frames, where)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")  # keeps .mp4: the muxer goes by the suffix
+    try:
+        write_video(tmp, frames, ctx.fps)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return seconds
+
+
+def _episodes(release: Path, configs: list[str], seed: int) -> Iterator[EpisodeContext]:
+    """One context per scored episode, lazily (each holds its decoded frames until dropped)."""
+    for config in configs:
+        for row in pq.read_table(release / config / INSTANCES).to_pylist():
+            for role, index in zip(row["roles"], row["episode_indices"]):
+                yield EpisodeContext(release, config, row, role, int(index), float(row["fps"]), seed)
+
+
+def _column(release: Path, config: str, column: str) -> list:
+    return pq.read_table(release / config / INSTANCES, columns=[column]).column(column).to_pylist()
+
+
+def _check_seeds(seeds: Sequence[int]) -> list[int]:
+    seeds = list(seeds)
+    if not seeds or len(set(seeds)) != len(seeds) or not all(
+            isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds):
+        raise GenerateError(f"seeds must be distinct non-negative integers, got {seeds}")
+    return seeds
+
+
+def _check_configs(release: Path, configs: Sequence[str] | None) -> list[str]:
+    known = test_configs(release)
+    if configs is None:
+        return known
+    unknown = [c for c in configs if c not in known]
+    if unknown or not configs:
+        raise GenerateError(f"{release}: configs {list(configs)} not among its scored configs ({', '.join(known)})")
+    return list(configs)
+
+
+def _previous_seconds(out: Path, name: str) -> float:
+    """generation_seconds of a submission of the same model already in `out` (0 if none); refuses another's."""
+    path = out / SUBMISSION_JSON
+    if not path.is_file():
+        return 0.0
+    try:
+        meta = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise GenerateError(f"{path}: not valid JSON ({e}); remove it or write to another folder") from None
+    model = meta.get("model") if isinstance(meta, dict) else None
+    if model != name:
+        raise GenerateError(f"{path}: holds a submission of model {model!r}, not {name!r}; write to another folder")
+    previous = meta.get("generation_seconds", 0)
+    return float(previous) if isinstance(previous, (int, float)) else 0.0
+
+
+def _write_manifest(out: Path, name: str, seeds: list[int], configs: list[str], seconds: float) -> None:
+    meta = {"model": name, "benchmark_version": wsp_data.BENCHMARK_VERSION, "seeds": seeds, "configs": configs,
+            "hardware": platform.processor() or platform.machine(), "generation_seconds": round(seconds, 3)}
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / f".{SUBMISSION_JSON}.partial"
+    tmp.write_text(json.dumps(meta, indent=1))
+    os.replace(tmp, out / SUBMISSION_JSON)
