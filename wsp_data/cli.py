@@ -5,6 +5,9 @@
     wsp sources [--seeds N]                                          scripted expert success per task
     wsp validate SUBMISSION --release DIR                            check a submission, score nothing
     wsp baseline NAME --release DIR --out SUBMISSION                 write a calibration-baseline submission
+    wsp generate --model MODULE:CALLABLE --release DIR --out SUB     run a model over a release → submission
+    wsp score SUBMISSION --release DIR --out REPORT_DIR              score a submission: JSON, Markdown, HTML
+    wsp calibrate --release DIR --out DIR                            every baseline, scored, in one table
 """
 
 from __future__ import annotations
@@ -67,11 +70,48 @@ def parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="check a submission against a release without scoring it")
     v.add_argument("submission", type=Path)
     v.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
-    bl = sub.add_parser("baseline", help="write a calibration-baseline submission (oracle, static)")
+    bl = sub.add_parser("baseline", help="write a calibration-baseline submission (oracle, static, action_blind, …)")
     bl.add_argument("name")
     bl.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     bl.add_argument("--out", type=Path, required=True)
+    bl.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    g = sub.add_parser("generate", help="run a model callable over a release and write a submission")
+    g.add_argument("--model", required=True, help="MODULE:CALLABLE taking (first_frame, actions, fps, seed)")
+    g.add_argument("--name", help="model name for submission.json (default: the MODULE:CALLABLE)")
+    g.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    g.add_argument("--out", type=Path, required=True)
+    g.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    g.add_argument("--configs", nargs="+", help="only these configs (default: every scored config)")
+    g.add_argument("--action-key", default="action", choices=("action", "action.ee"),
+                   help="joint-space (default) or end-effector action stream")
+    g.add_argument("--quiet", action="store_true")
+    sc = sub.add_parser("score", help="score a submission against a release; write JSON, Markdown and HTML reports")
+    sc.add_argument("submission", type=Path)
+    sc.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    sc.add_argument("--out", type=Path, required=True, help="report folder (also holds the resumable cache)")
+    _score_options(sc)
+    ca = sub.add_parser("calibrate", help="write every calibration baseline, score each, print one table")
+    ca.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    ca.add_argument("--out", type=Path, required=True, help="folder for the baseline submissions and reports")
+    ca.add_argument("--baselines", nargs="+", help="default: all registered baselines")
+    ca.add_argument("--seeds", type=int, nargs="+", default=[0])
+    _score_options(ca)
     return p
+
+
+def _score_options(p: argparse.ArgumentParser) -> None:
+    from wsp_eval.backends import FLOW, JUDGE, TRACKER
+
+    p.add_argument("--workers", type=_positive, default=1, help="scoring processes (default 1)")
+    p.add_argument("--allow-missing", action="store_true", help="score missing or unusable videos as 0")
+    p.add_argument("--flow", choices=FLOW, default="dis")
+    p.add_argument("--flow-checkpoint", help="local checkpoint for --flow dpflow")
+    p.add_argument("--tracker", choices=TRACKER, default="lk")
+    p.add_argument("--tracker-checkpoint", help="local checkpoint for --tracker tapnext")
+    p.add_argument("--judge", choices=JUDGE, default="rules")
+    p.add_argument("--judge-url", help="OpenAI-compatible endpoint for --judge openai (e.g. http://127.0.0.1:8000/v1)")
+    p.add_argument("--judge-model", help="model name served there (e.g. Qwen/Qwen3-VL-8B-Instruct)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def cmd_build(args) -> int:
@@ -152,13 +192,82 @@ def cmd_validate(args) -> int:
 
 
 def cmd_baseline(args) -> int:
-    from wsp_eval.baselines import write_baseline
+    from wsp_eval.baselines import BaselineError, write_baseline
 
     try:
-        n = write_baseline(args.name, _release_or_error(args.release), args.out)
+        n = write_baseline(args.name, _release_or_error(args.release), args.out, seeds=tuple(args.seeds), progress=True)
     except KeyError as e:
         raise CliError(e.args[0]) from None
+    except BaselineError as e:
+        raise CliError(str(e)) from None
     print(f"wrote {n} videos of baseline {args.name!r} to {args.out}")
+    return 0
+
+
+def cmd_generate(args) -> int:
+    from wsp_eval.generate import GenerateError, generate, load_model
+
+    try:
+        model = load_model(args.model)
+        result = generate(model, _release_or_error(args.release), args.out, seeds=tuple(args.seeds),
+                          configs=args.configs, name=args.name or args.model, action_key=args.action_key,
+                          progress=not args.quiet)
+    except GenerateError as e:
+        raise CliError(str(e)) from None
+    print(f"{args.out}: {result.written} video(s) written, {result.skipped} already there, "
+          f"{result.seconds:.1f} s; check it with `wsp validate {args.out} --release {args.release}`")
+    return 0
+
+
+def _spec(args):
+    from wsp_eval.backends import BackendSpec
+
+    return BackendSpec(args.flow, args.tracker, args.judge, args.flow_checkpoint, args.tracker_checkpoint,
+                       args.judge_url, args.judge_model)
+
+
+def _score(submission: Path, release: Path, out: Path, args) -> dict:
+    from wsp_eval.backends.errors import BackendUnavailable
+    from wsp_eval.score import ScoreError, score_submission
+
+    try:
+        return score_submission(submission, release, out, spec=_spec(args), workers=args.workers,
+                                allow_missing=args.allow_missing, progress=not args.quiet)
+    except (ScoreError, BackendUnavailable) as e:
+        raise CliError(str(e)) from None
+
+
+def cmd_score(args) -> int:
+    from wsp_eval.report import baseline_table
+
+    report = _score(args.submission, _release_or_error(args.release), args.out, args)
+    print(baseline_table({report["submission"]["model"]: report}))
+    print(f"\nreports: {args.out / 'report.md'}, {args.out / 'report.html'}, {args.out / 'report.json'}")
+    return 0
+
+
+def cmd_calibrate(args) -> int:
+    from wsp_eval.baselines import BASELINES, BaselineError, write_baseline
+    from wsp_eval.report import baseline_table
+
+    release = _release_or_error(args.release)
+    names = args.baselines or list(BASELINES)
+    unknown = [n for n in names if n not in BASELINES]
+    if unknown:
+        raise CliError(f"unknown baseline(s) {', '.join(unknown)}; known: {', '.join(BASELINES)}")
+    reports = {}
+    for name in names:
+        sub = args.out / "submissions" / name
+        try:
+            write_baseline(name, release, sub, seeds=tuple(args.seeds), progress=not args.quiet)
+        except BaselineError as e:
+            raise CliError(str(e)) from None
+        reports[name] = _score(sub, release, args.out / "reports" / name, args)
+    table = baseline_table(reports)
+    (args.out / "baselines.md").write_text(table + "\n")
+    print(table)
+    print(f"\nper-baseline reports (HTML with plots): {args.out / 'reports'}/<baseline>/report.html; "
+          f"table: {args.out / 'baselines.md'}")
     return 0
 
 
@@ -166,13 +275,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
-                    "baseline": cmd_baseline}
+                    "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate}
         return commands[args.command](args)
     except CliError as e:
         print(f"wsp: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("wsp: interrupted; staged instances are kept, re-run the same command to resume", file=sys.stderr)
+        print("wsp: interrupted; finished work is kept (staged instances, written videos, cached scores): re-run "
+              "the same command to resume", file=sys.stderr)
         return 130
 
 

@@ -1,7 +1,20 @@
-"""Suite scorers, found by name. One module per suite; this is the one place that registers them."""
+"""Suite scorers, found by name. One module per suite; this is the one place that registers them.
+
+Every suite module provides:
+    SUITE, TITLE     its key ("t1") and title
+    ROLES            the generated rollouts one seed of an instance needs (roles of the instance row)
+    NEEDS            the backend roles it uses ("flow", "tracker", "judge")
+    GROUP_BY         what its report breakdown is cut by
+    BALANCED         True when the suite score averages within groups first, then across them (T5)
+    prepare(ref, backends)                  reference-side work, once per instance (`InstanceReference`)
+    score_seed(prepared, videos, backends)  (score 0–100, detail) for one seed; videos: role → (frames, fps)
+    groups(rows)                            the breakdown group of every instance row
+"""
 
 from __future__ import annotations
 
-from wsp_eval.suites import t1
+from types import ModuleType
 
-SCORERS = {"t1": t1}
+from wsp_eval.suites import t1, t2, t3, t4, t5
+
+SCORERS: dict[str, ModuleType] = {m.SUITE: m for m in (t1, t2, t3, t4, t5)}

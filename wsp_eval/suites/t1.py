@@ -12,7 +12,10 @@ import numpy as np
 
 from wsp_eval.video import aligned_mse
 
+SUITE, TITLE = "t1", "Local action calibration"
 ROLES = ("original", "small", "large")
+NEEDS: tuple[str, ...] = ()
+GROUP_BY, BALANCED = "task", False
 
 
 def calibration(r: float, r_star: float) -> float:
@@ -32,3 +35,16 @@ def seed_score(videos: dict[str, tuple[np.ndarray, float]], r_star: float) -> fl
 def instance_score(per_seed: list[dict[str, tuple[np.ndarray, float]]], r_star: float) -> float:
     """Seeds are averaged per instance before anything else."""
     return float(np.mean([seed_score(v, r_star) for v in per_seed]))
+
+
+def prepare(ref, backends) -> float:
+    return float(ref.row["r_star"])
+
+
+def score_seed(r_star: float, videos, backends) -> tuple[float, dict]:
+    """The engine's interface: S on the 0–100 scale of the suite score."""
+    return 100.0 * seed_score(videos, r_star), {}
+
+
+def groups(rows: list[dict]) -> list[str]:
+    return [r["task"] for r in rows]

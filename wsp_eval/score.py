@@ -1,0 +1,314 @@
+"""`wsp score`: a submission against a release → per-instance results → suite, group and overall scores with
+95% bootstrap CIs (SPEC §6) → JSON, Markdown and HTML reports (`wsp_eval.report`).
+
+- Seeds are averaged per instance before anything else; a suite score is the mean over instances (T5: over
+  primitives of the mean within each), Overall = unweighted mean of a platform's T1–T5, and the macro average
+  is the mean over platforms.
+- CIs: `BOOTSTRAP` resamples of the instances (within groups for a balanced suite), percentile interval,
+  fixed RNG seed; Overall and macro CIs combine the suites' resamples index by index.
+- A missing or unusable video (missing, unreadable, wrong frame count, absurd fps) is a *problem*. Without
+  `allow_missing` a missing file stops scoring before it starts and a broken one stops it at the end (the
+  finished instances are cached); with it, the seed of every affected instance scores 0 and the report
+  counts and lists the problems.
+- Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
+  submission, release and backends skips them (another key clears the cache).
+- Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
+  single-threaded).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from wsp_data.schema import INSTANCES
+from wsp_eval import backends as backend_registry
+from wsp_eval.backends import BackendSpec, Backends
+from wsp_eval.submission import SUBMISSION_JSON, Expected, check_video, test_configs, validate
+from wsp_eval.suites import SCORERS
+from wsp_eval.suites.reference import InstanceReference
+from wsp_eval.video import VideoError, read_video
+
+REPORT_VERSION = 1
+BOOTSTRAP = 1000  # resamples for the 95% CIs
+BOOTSTRAP_SEED = 0
+CACHE = "cache/instances.jsonl"
+CACHE_KEY = "cache/key.json"
+
+
+class ScoreError(RuntimeError):
+    """Scoring cannot go on; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """One instance to score (what a worker process receives)."""
+
+    release: str
+    submission: str
+    config: str
+    row: dict
+    seeds: tuple[int, ...]
+
+
+def split_config(config: str) -> tuple[str, str]:
+    suite, platform = config.split("_", 1)
+    return suite, platform
+
+
+# -- one instance -----------------------------------------------------------------------------------------------
+_BACKENDS: dict[tuple, Backends] = {}
+
+
+def _backends(spec: BackendSpec, needs: tuple[str, ...]) -> Backends:
+    key = (spec, needs)
+    if key not in _BACKENDS:
+        _BACKENDS[key] = backend_registry.make(spec, needs)
+    return _BACKENDS[key]
+
+
+def _load(path: Path, expected: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, str | None]:
+    if not path.is_file():
+        return None, f"{rel}: missing"
+    problems = check_video(path, expected, rel)
+    if problems:
+        return None, "; ".join(map(str, problems))
+    try:
+        return read_video(path), None
+    except VideoError as e:  # pragma: no cover - check_video already decoded it
+        return None, f"{rel}: {e}"
+
+
+def score_instance(job: Job, spec: BackendSpec) -> dict:
+    """Score one instance over every seed: a JSON-ready record."""
+    suite, platform = split_config(job.config)
+    module = SCORERS[suite]
+    backends = _backends(spec, module.NEEDS)
+    ref = InstanceReference(Path(job.release) / job.config, job.row)
+    prepared = module.prepare(ref, backends)
+    seeds, problems = [], []
+    for seed in job.seeds:
+        videos = {}
+        for role, episode_id, n in zip(job.row["roles"], job.row["episode_ids"], job.row["num_frames"]):
+            exp = Expected(job.config, episode_id, seed, n, job.row["fps"])
+            video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath)
+            if problem:
+                problems.append(problem)
+            else:
+                videos[role] = video
+        if len(videos) < len(job.row["roles"]):
+            seeds.append({"seed": seed, "score": 0.0, "missing": True})
+            continue
+        score, detail = module.score_seed(prepared, videos, backends)
+        seeds.append({"seed": seed, "score": float(score), **detail})
+    record = {"config": job.config, "suite": suite, "platform": platform, "instance_id": job.row["instance_id"],
+              "task": job.row["task"], "score": float(np.mean([s["score"] for s in seeds])), "seeds": seeds,
+              "problems": problems}
+    if hasattr(module, "reference_check"):
+        record["reference"] = module.reference_check(prepared)
+    return record
+
+
+def _worker(args: tuple[Job, BackendSpec]) -> dict:
+    import cv2
+
+    cv2.setNumThreads(1)
+    return score_instance(*args)
+
+
+# -- the run ----------------------------------------------------------------------------------------------------
+def _rows(release: Path, config: str) -> list[dict]:
+    return pq.read_table(release / config / INSTANCES).to_pylist()
+
+
+def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list[str]) -> dict:
+    manifest = (submission / SUBMISSION_JSON).read_bytes()
+    rel = (release / "release.json").read_bytes()
+    return {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
+            "backends": spec.to_json(), "configs": configs}
+
+
+def _open_cache(out: Path, key: dict) -> dict[tuple[str, str], dict]:
+    """Cached records of an earlier run with the same key (a partial last line is ignored)."""
+    key_path, cache = out / CACHE_KEY, out / CACHE
+    cache.parent.mkdir(parents=True, exist_ok=True)
+    if not key_path.is_file() or json.loads(key_path.read_text()) != key:
+        cache.unlink(missing_ok=True)
+        key_path.write_text(json.dumps(key, indent=1))
+        return {}
+    done = {}
+    for line in cache.read_text().splitlines() if cache.is_file() else []:
+        try:
+            r = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        done[(r["config"], r["instance_id"])] = r
+    return done
+
+
+def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[dict, list[str]]:
+    """The manifest and the configs to score; missing files stop here unless allowed."""
+    if not submission.is_dir():
+        raise ScoreError(f"{submission}: submission folder not found")
+    problems = validate(submission, release, check_videos=False)
+    fatal = [p for p in problems if p.path == SUBMISSION_JSON or p.message.startswith("is a link")]
+    missing = [p for p in problems if p not in fatal and p.message == "missing"]
+    if fatal:
+        raise ScoreError("the submission is not scorable:\n  " + "\n  ".join(map(str, fatal)))
+    if missing and not allow_missing:
+        shown = "\n  ".join(map(str, missing[:20])) + (f"\n  … and {len(missing) - 20} more" if len(missing) > 20 else "")
+        raise ScoreError(f"{len(missing)} video(s) missing:\n  {shown}\nrun `wsp validate` for every problem, or "
+                         "score with --allow-missing (a missing rollout scores 0)")
+    meta = json.loads((submission / SUBMISSION_JSON).read_text())
+    return meta, meta.get("configs") or test_configs(release)
+
+
+def score_submission(submission: Path, release: Path, out: Path, *, spec: BackendSpec = BackendSpec(),
+                     workers: int = 1, allow_missing: bool = False, progress: bool = True) -> dict:
+    """Score `submission` against `release`; write the reports under `out`; return the report dict."""
+    from tqdm import tqdm
+
+    from wsp_data.release import load_release
+    from wsp_eval.report import write_reports
+
+    submission, release, out = Path(submission), Path(release), Path(out)
+    rel_meta = load_release(release)
+    meta, configs = _preflight(submission, release, allow_missing)
+    needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
+    backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
+    out.mkdir(parents=True, exist_ok=True)
+    done = _open_cache(out, _cache_key(submission, release, spec, configs))
+    rows = {c: _rows(release, c) for c in configs}
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]))
+            for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
+    start = time.perf_counter()
+    bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress)
+    with open(out / CACHE, "a") as cache:
+        def keep(record: dict) -> None:
+            done[(record["config"], record["instance_id"])] = record
+            cache.write(json.dumps(record) + "\n")
+            cache.flush()
+            bar.update()
+
+        if workers <= 1:
+            for job in todo:
+                keep(score_instance(job, spec))
+        else:
+            import multiprocessing as mp
+
+            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+                for record in pool.map(_worker, [(j, spec) for j in todo], chunksize=1):
+                    keep(record)
+    bar.close()
+    records = [done[(c, r["instance_id"])] for c in configs for r in rows[c]]
+    problems = [p for r in records for p in r["problems"]]
+    if problems and not allow_missing:
+        raise ScoreError(f"{len(problems)} unusable video(s) (finished instances are cached):\n  "
+                         + "\n  ".join(problems[:20]) + "\nfix them, or score with --allow-missing (they score 0)")
+    report = aggregate(records, rows, configs)
+    report.update(
+        submission={"path": str(submission), "model": meta["model"], "seeds": meta["seeds"],
+                    "hardware": meta.get("hardware"), "generation_seconds": meta.get("generation_seconds")},
+        release={"path": str(release), "version": rel_meta["version"],
+                 "code_version": str(rel_meta.get("code_version", ""))},
+        backends=backends.describe(),
+        allow_missing=allow_missing, problems=problems,
+        timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
+        instances=records,
+    )
+    write_reports(report, out)
+    return report
+
+
+# -- aggregation ------------------------------------------------------------------------------------------------
+def _ci(samples: np.ndarray) -> list[float] | None:
+    return None if samples is None else [float(np.percentile(samples, 2.5)), float(np.percentile(samples, 97.5))]
+
+
+def _bootstrap(scores: np.ndarray, groups: list[str] | None, rng: np.random.Generator) -> np.ndarray:
+    """BOOTSTRAP resampled suite scores: plain means, or (balanced) means of per-group resampled means."""
+    if groups is None:
+        idx = rng.integers(0, len(scores), (BOOTSTRAP, len(scores)))
+        return scores[idx].mean(axis=1)
+    parts = []
+    for g in dict.fromkeys(groups):
+        s = scores[[i for i, x in enumerate(groups) if x == g]]
+        parts.append(s[rng.integers(0, len(s), (BOOTSTRAP, len(s)))].mean(axis=1))
+    return np.mean(parts, axis=0)
+
+
+def _suite_score(scores: np.ndarray, groups: list[str], balanced: bool) -> float:
+    if not balanced:
+        return float(scores.mean())
+    return float(np.mean([scores[[i for i, x in enumerate(groups) if x == g]].mean() for g in dict.fromkeys(groups)]))
+
+
+def _group_rows(scores: np.ndarray, groups: list[str], rng: np.random.Generator) -> list[dict]:
+    out = []
+    for g in sorted(set(groups), key=lambda x: (not x.isdigit(), int(x) if x.isdigit() else 0, x)):
+        s = scores[[i for i, x in enumerate(groups) if x == g]]
+        out.append({"group": g, "score": float(s.mean()), "n": len(s),
+                    "ci": _ci(_bootstrap(s, None, rng)) if len(s) > 1 else None})
+    return out
+
+
+def _confusion(records: list[dict], rows: list[dict]) -> dict:
+    from wsp_eval.backends.judge import PRIMITIVES
+
+    labels = [p for p in PRIMITIVES if any(r["primitive"] == p for r in rows)]
+    columns = list(PRIMITIVES) + ["unparsed"]
+    matrix = [[0] * len(columns) for _ in labels]
+    for rec, row in zip(records, rows):
+        for s in rec["seeds"]:
+            if not s.get("missing"):
+                matrix[labels.index(row["primitive"])][columns.index(s["label"] or "unparsed")] += 1
+    return {"labels": labels, "columns": columns, "matrix": matrix}
+
+
+def aggregate(records: list[dict], rows: dict[str, list[dict]], configs: list[str]) -> dict:
+    """The report's score part: platforms → suites (score, CI, n, groups) and Overall; the macro average."""
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    by_config: dict[str, list[dict]] = {}
+    for r in records:
+        by_config.setdefault(r["config"], []).append(r)
+    platforms: dict[str, dict] = {}
+    samples: dict[str, dict[str, np.ndarray]] = {}
+    for config in configs:
+        suite, platform = split_config(config)
+        module, recs = SCORERS[suite], by_config.get(config, [])
+        if not recs:
+            continue
+        scores = np.array([r["score"] for r in recs])
+        groups = module.groups(rows[config])
+        boot = _bootstrap(scores, groups if module.BALANCED else None, rng)
+        entry = {"config": config, "title": module.TITLE, "score": _suite_score(scores, groups, module.BALANCED),
+                 "ci": _ci(boot), "n": len(recs), "missing_rollouts": sum(s.get("missing", False) for r in recs
+                                                                         for s in r["seeds"]),
+                 "groups": {"by": module.GROUP_BY, "rows": _group_rows(scores, groups, rng)}}
+        for rec, g in zip(recs, groups):
+            rec["group"] = g
+        if suite == "t5":
+            entry["confusion"] = _confusion(recs, rows[config])
+            checks = [r["reference"] for r in recs]
+            entry["judge_agreement"] = 100.0 * float(np.mean([c["label"] == row["primitive"]
+                                                              for c, row in zip(checks, rows[config])]))
+            entry["judge_reference_score"] = float(np.mean([c["score"] for c in checks]))
+        platforms.setdefault(platform, {"suites": {}})["suites"][suite] = entry
+        samples.setdefault(platform, {})[suite] = boot
+    for platform, p in platforms.items():
+        suites = sorted(p["suites"])
+        p["overall"] = {"score": float(np.mean([p["suites"][s]["score"] for s in suites])),
+                        "ci": _ci(np.mean([samples[platform][s] for s in suites], axis=0)),
+                        "suites": suites, "complete": set(suites) >= set(SCORERS)}
+    names = sorted(platforms)
+    macro = {"score": float(np.mean([platforms[p]["overall"]["score"] for p in names])) if names else None,
+             "ci": _ci(np.mean([np.mean(list(samples[p].values()), axis=0) for p in names], axis=0)) if names else None,
+             "platforms": names}
+    return {"wsp_report_version": REPORT_VERSION, "platforms": platforms, "macro_average": macro}

@@ -1,0 +1,56 @@
+"""T2 Global trajectory coverage (SPEC §3 T2): RMFA (`wsp_eval.flow`) of the generated video against the
+cross-task reference, over their common duration; report cut by receiver–donor mismatch decile (rank by
+`mismatch`, ties by `instance_id`; decile 1 = smallest mismatch)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wsp_eval.flow import clip_duration, reference_flows, rmfa_score, video_flows
+
+SUITE, TITLE = "t2", "Global trajectory coverage"
+ROLES = ("reference",)
+NEEDS = ("flow",)
+GROUP_BY, BALANCED = "mismatch decile", False
+DECILES = 10
+
+
+class _Reference:
+    """Reference flows per common duration (the full clip unless a generated video is shorter)."""
+
+    def __init__(self, ref, role: str, backend):
+        self.frames, self.masks, self.fps = ref.frames(role), ref.masks(role), ref.fps
+        self.duration = clip_duration(len(self.frames), self.fps)
+        self.backend = backend
+        self._flows: dict[float, object] = {}
+
+    def flows(self, duration: float):
+        key = round(min(duration, self.duration), 9)
+        if key not in self._flows:
+            self._flows[key] = reference_flows(self.frames, self.masks, self.fps, key, self.backend)
+        return self._flows[key]
+
+
+def prepare(ref, backends, role: str = "reference") -> _Reference:
+    return _Reference(ref, role, backends.flow)
+
+
+def rmfa(prepared: _Reference, frames: np.ndarray, fps: float, backend) -> tuple[float, dict]:
+    """RMFA of one generated video; a video too short for one flow (or with no scorable window) scores 0."""
+    duration = min(prepared.duration, clip_duration(len(frames), fps))
+    ref = prepared.flows(duration)
+    score = rmfa_score(video_flows(frames, fps, duration, backend), ref.flows, ref.masks)
+    return (0.0 if score is None else score), {"common_seconds": duration, "flows": len(ref.flows)}
+
+
+def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
+    frames, fps = videos["reference"]
+    return rmfa(prepared, frames, fps, backends.flow)
+
+
+def groups(rows: list[dict]) -> list[str]:
+    order = sorted(range(len(rows)), key=lambda i: (rows[i]["mismatch"], rows[i]["instance_id"]))
+    out = [""] * len(rows)
+    for rank, i in enumerate(order):
+        out[i] = str(rank * DECILES // len(rows) + 1)
+    return out
