@@ -75,6 +75,21 @@ def test_every_planted_defect_is_reported_by_file(oracle, t1_release, tmp_path):
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 1 and "Traceback" not in r.stderr and "9 problem(s)" in r.stdout
 
+    # `wsp score` never crashes on it: a link stops it with a clear message; missing files stop it unless
+    # --allow-missing, which scores every defective rollout 0 and lists it in the report
+    score = [sys.executable, "-m", "wsp_data.cli", "score", str(sub), "--release", str(t1_release), "--quiet"]
+    r = subprocess.run(score + ["--out", str(tmp_path / "r1")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "is a link" in r.stderr
+    ep(6).unlink()
+    r = subprocess.run(score + ["--out", str(tmp_path / "r2")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and "--allow-missing" in r.stderr
+    r = subprocess.run(score + ["--out", str(tmp_path / "r3"), "--allow-missing"], capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
+    report = json.loads((tmp_path / "r3" / "report.json").read_text())
+    assert len(report["problems"]) == 7  # episodes 0 and 6 missing, 1 truncated, 2 short, 3 empty, 4 constant, 5 fps
+    assert (tmp_path / "r3" / "report.html").is_file() and (tmp_path / "r3" / "report.md").is_file()
+
 
 def test_bad_manifest(tmp_path, t1_release):
     assert [str(p) for p in validate(tmp_path / "nope", t1_release)] == [f"{tmp_path / 'nope'}: submission folder not found"]
