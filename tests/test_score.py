@@ -46,7 +46,10 @@ def test_oracle_scores_100_on_t2_t4_and_static_fails(suites_scores):
     oracle, static = suites_scores["oracle"][1], suites_scores["static"][1]
     assert _suite(oracle, "t2")["score"] == pytest.approx(100.0, abs=1e-9)
     assert _suite(oracle, "t4")["score"] == 100.0
-    assert _suite(static, "t2")["score"] < 5.0   # no motion at all: E = R on every active pixel → S_w = 0 (or ≈0)
+    # a frozen video has F̂ = 0, so E = R and S_w = 100·(1 − R / max(R, c)): 0 in windows where the reference
+    # moves fast (R ≥ c = 3.16 px), but partial credit in slow ones (R < c): measured 17.5 on 12 development
+    # instances and 25.8 on this tiny release; it stays far below the oracle's 100
+    assert _suite(static, "t2")["score"] < 40.0
     assert _suite(static, "t4")["score"] == 0.0  # a frozen video never passes the motion gate
     assert _suite(static, "t5")["score"] == 0.0  # the judge sees no agent motion
     assert set(oracle["backends"]) == {"flow", "tracker", "judge"}
