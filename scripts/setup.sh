@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Idempotent set-up: system packages (Mesa 25 lavapipe, ffmpeg), a Python 3.12 venv in .venv with the
+# Idempotent set-up: system packages (Mesa 25 lavapipe, ffmpeg, Chromium + chromedriver for the teleop
+# page's browser test), a Python 3.12 venv in .venv with the
 # pinned packages, and a check that SAPIEN renders one frame. Re-running after success takes seconds.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -19,7 +20,9 @@ mesa_ok() {
 }
 
 system_packages() {
-  if mesa_ok && command -v ffmpeg >/dev/null; then return; fi
+  if mesa_ok && command -v ffmpeg >/dev/null && command -v chromium >/dev/null && [ -x /usr/bin/chromedriver ]; then
+    return
+  fi
   command -v apt-get >/dev/null || die "apt-get not found: this set-up supports Debian bookworm machines"
   local codename; codename="$(. /etc/os-release; echo "${VERSION_CODENAME:-}")"
   [ "$codename" = bookworm ] || die "expected Debian bookworm, found '${codename:-unknown}'"
@@ -40,10 +43,10 @@ system_packages() {
     log "adding bookworm-backports from $uri"
     printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: %s\n' "$uri" "$key" | as_root tee "$src" >/dev/null
   fi
-  log "installing mesa-vulkan-drivers (Mesa 25, bookworm-backports) and ffmpeg"
+  log "installing mesa-vulkan-drivers (Mesa 25, bookworm-backports), ffmpeg, chromium and chromium-driver"
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libosmesa6 >/dev/null
-  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq ffmpeg >/dev/null
+  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq ffmpeg chromium chromium-driver >/dev/null
   mesa_ok || die "mesa-vulkan-drivers >= 25 with lvp_icd.json is still missing after install"
 }
 

@@ -8,6 +8,7 @@
     wsp generate --model MODULE:CALLABLE --release DIR --out SUB     run a model over a release → submission
     wsp score SUBMISSION --release DIR --out REPORT_DIR              score a submission: JSON, Markdown, HTML
     wsp calibrate --release DIR --out DIR                            every baseline, scored, in one table
+    wsp teleop --task T --seed S --operator NAME                     browser teleoperation → source trajectory
 """
 
 from __future__ import annotations
@@ -96,6 +97,14 @@ def parser() -> argparse.ArgumentParser:
     ca.add_argument("--baselines", nargs="+", help="default: all registered baselines")
     ca.add_argument("--seeds", type=int, nargs="+", default=[0])
     _score_options(ca)
+    t = sub.add_parser("teleop", help="serve the browser teleoperation page; record operator source trajectories")
+    t.add_argument("--task", default="PickCube", help="ManiSkill task (default PickCube)")
+    t.add_argument("--seed", type=int, default=0, help="scene seed of the episode (default 0)")
+    t.add_argument("--operator", required=True, help="operator name recorded in the provenance")
+    t.add_argument("--out", type=Path, default=Path("teleop"), help="folder for saved trajectories (default ./teleop)")
+    t.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0 = any free port)")
+    t.add_argument("--step", type=float, default=0.01, help="TCP translation per command, m (default 0.01)")
+    t.add_argument("--yaw-step", type=float, default=0.1, help="TCP yaw per command, rad (default 0.1)")
     return p
 
 
@@ -271,11 +280,18 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def cmd_teleop(args) -> int:
+    from wsp_data.sources import teleop
+
+    return teleop.run(args)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
-                    "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate}
+                    "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
+                    "teleop": cmd_teleop}
         return commands[args.command](args)
     except CliError as e:
         print(f"wsp: error: {e}", file=sys.stderr)
