@@ -31,10 +31,9 @@ import pyarrow.parquet as pq
 from wsp_data.schema import INSTANCES
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
-from wsp_eval.submission import SUBMISSION_JSON, Expected, check_video, test_configs, validate
+from wsp_eval.submission import SUBMISSION_JSON, Expected, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
-from wsp_eval.video import VideoError, read_video
 
 REPORT_VERSION = 1
 BOOTSTRAP = 1000  # resamples for the 95% CIs
@@ -77,13 +76,8 @@ def _backends(spec: BackendSpec, needs: tuple[str, ...]) -> Backends:
 def _load(path: Path, expected: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, str | None]:
     if not path.is_file():
         return None, f"{rel}: missing"
-    problems = check_video(path, expected, rel)
-    if problems:
-        return None, "; ".join(map(str, problems))
-    try:
-        return read_video(path), None
-    except VideoError as e:  # pragma: no cover - check_video already decoded it
-        return None, f"{rel}: {e}"
+    video, problems = load_video(path, expected, rel)
+    return video, ("; ".join(map(str, problems)) or None)
 
 
 def score_instance(job: Job, spec: BackendSpec) -> dict:

@@ -109,13 +109,23 @@ def _links(sub: Path) -> list[Problem]:
     return problems
 
 
-def check_video(path: Path, exp: Expected, rel: str) -> list[Problem]:
+def load_video(path: Path, exp: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, list[Problem]]:
+    """Decode a submitted video once: (frames, fps) when it meets the contract, and its problems."""
     if path.stat().st_size == 0:
-        return [Problem(rel, "empty file (zero frames)")]
+        return None, [Problem(rel, "empty file (zero frames)")]
     try:
         frames, fps = read_video(path)
     except VideoError as e:
-        return [Problem(rel, str(e).split(": ", 1)[-1])]
+        return None, [Problem(rel, str(e).split(": ", 1)[-1])]
+    problems = check_frames(frames, fps, exp, rel)
+    return (None if problems else (frames, fps)), problems
+
+
+def check_video(path: Path, exp: Expected, rel: str) -> list[Problem]:
+    return load_video(path, exp, rel)[1]
+
+
+def check_frames(frames: np.ndarray, fps: float, exp: Expected, rel: str) -> list[Problem]:
     problems = []
     if len(frames) == 0:
         return [Problem(rel, "zero frames")]
