@@ -7,6 +7,7 @@ A folder is a WorldSimProbe release when it holds `release.json`; `describe` rea
 from __future__ import annotations
 
 import hashlib
+from collections import Counter
 import json
 import subprocess
 from pathlib import Path
@@ -73,14 +74,15 @@ def write_release(root: Path, suites: dict) -> dict:
         configs[name] = entry
     card_configs = []
     for name, entry in configs.items():
-        table = pq.read_table(root / name / INSTANCES, columns=["task", "episode_indices"])
+        table = pq.read_table(root / name / INSTANCES, columns=["task", "episode_indices", "source"])
         tasks = sorted(set(table.column("task").to_pylist()))
+        sources = dict(sorted(Counter(s.split(":")[0].split(" (")[0] for s in table.column("source").to_pylist()).items()))
         episodes = sum(len(x) for x in table.column("episode_indices").to_pylist())
         entry["counts"] = {"instances": table.num_rows, "episodes": episodes, "tasks": len(tasks)}
         builder = suites[entry["build_config"]["suite"]]
         card_configs.append(dict(name=name, suite=entry["build_config"]["suite"], suite_title=builder.title,
                                  suite_description=builder.description, platform=entry["build_config"]["platform"],
-                                 instances=table.num_rows, episodes=episodes, tasks=tasks))
+                                 instances=table.num_rows, episodes=episodes, tasks=tasks, sources=sources))
     if not card_configs:
         raise ReleaseError(f"{root}: no assembled config to describe")
     release = {
