@@ -72,9 +72,10 @@ T2_TASKS = ("PickCube", "PushCube", "PullCube")
 
 @pytest.fixture(scope="session")
 def suites_release(tmp_path_factory) -> Path:
-    """One real release holding tiny T2 (3 replays over T2_TASKS), T4 (6, PickCube: two of each kind) and T5
-    (8, PickCube: one per primitive) configs, each with its source rollouts."""
+    """One real release holding tiny T2 (3 replays over T2_TASKS), T3 (8, PickCube: one group of all eight
+    sources), T4 (6, PickCube: two of each kind) and T5 (8, PickCube: one per primitive) configs."""
     out = tmp_path_factory.mktemp("suites") / "worldsimprobe"
-    for suite, count, tasks in (("t2", 3, T2_TASKS), ("t4", 6, ("PickCube",)), ("t5", 8, ("PickCube",))):
+    for suite, count, tasks in (("t2", 3, T2_TASKS), ("t3", 8, ("PickCube",)), ("t4", 6, ("PickCube",)),
+                                ("t5", 8, ("PickCube",))):
         build_tiny(tmp_path_factory, suite, count, tasks, out=out)
     return out

@@ -1,10 +1,10 @@
-"""`wsp score` end to end on real tiny releases (T1; T2, T4 and T5 with source rollouts), and the aggregation
+"""`wsp score` end to end on real tiny releases (T1; T2, T3, T4 and T5), and the aggregation
 rules of SPEC §6 on records whose answers are worked out by hand.
 
 Tolerances:
 - T1 oracle ≥ 99: r* comes from the simulator's own frames, r from the decoded reference (h264 yuv444p crf 0,
   ~52 dB); the 0.3% difference in D costs at most a fraction of a point per instance.
-- T2 and T4 oracle = 100 exactly: baseline videos are written losslessly (libx264rgb), so the generated
+- T2, T3 and T4 oracle = 100 exactly: baseline videos are written losslessly (libx264rgb), so the generated
   flows and tracks equal the reference's, computed from the same decoded frames.
 """
 
@@ -46,6 +46,9 @@ def test_oracle_scores_100_on_t2_t4_and_static_fails(suites_scores):
     oracle, static = suites_scores["oracle"][1], suites_scores["static"][1]
     assert _suite(oracle, "t2")["score"] == pytest.approx(100.0, abs=1e-9)
     assert _suite(oracle, "t4")["score"] == 100.0
+    t3 = _suite(oracle, "t3")
+    assert t3["score"] == pytest.approx(100.0, abs=1e-9) and t3["groups"]["by"] == "source group"
+    assert len(t3["groups"]["rows"]) == 8 and all(g["score"] == pytest.approx(100.0) for g in t3["groups"]["rows"])
     # a frozen video has F̂ = 0, so E = R and S_w = 100·(1 − R / max(R, c)): 0 in windows where the reference
     # moves fast (R ≥ c = 3.16 px), but partial credit in slow ones (R < c): measured 17.5 on 12 development
     # instances and 25.8 on this tiny release; it stays far below the oracle's 100
@@ -67,8 +70,9 @@ def test_report_structure_and_files(suites_scores):
     for rec in (r for r in report["instances"] if r["suite"] == "t5"):
         assert rec["seeds"][0]["label"] == rec["reference"]["label"]
     overall = report["platforms"]["maniskill"]["overall"]
-    assert overall["suites"] == ["t2", "t4", "t5"] and not overall["complete"]
-    assert overall["score"] == pytest.approx(np.mean([t2["score"], t4["score"], t5["score"]]))
+    t3 = _suite(report, "t3")
+    assert overall["suites"] == ["t2", "t3", "t4", "t5"] and not overall["complete"]
+    assert overall["score"] == pytest.approx(np.mean([t2["score"], t3["score"], t4["score"], t5["score"]]))
     lo, hi = overall["ci"]
     assert lo <= overall["score"] <= hi
 

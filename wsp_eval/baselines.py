@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
+from wsp_data.schema import INSTANCES
 from wsp_eval.reference import episodes, reference_frames, reference_masks
 
 BLUR_SIGMA_PX = 2.0  # `blur`: standard deviation of the Gaussian kernel, pixels
@@ -24,6 +25,8 @@ NOISE_SIGMA = 10.0  # `noise`: standard deviation of the additive Gaussian noise
 LAG_SECONDS = 0.25  # `lag`: delay of the video (5 frames at 20 Hz)
 T1_PREFIX = "t1_"  # T1 configs: the unperturbed source rollout is the scored `original` role
 T1_SOURCE_ROLE = "original"  # role of the unperturbed rollout in a T1 instance
+T3_PREFIX = "t3_"  # T3 configs: the canonical execution is the expert member of the instance's group
+T3_SOURCE_GROUP = "expert"
 SOURCE_COLUMN = "source_episode_index"  # other suites: instance column of an extra, unscored source episode
 
 
@@ -72,7 +75,7 @@ class EpisodeContext:
 
     def source_frames(self) -> np.ndarray:
         """RGB frames of the instance's unperturbed source rollout (its own length)."""
-        index = source_episode_index(self.config, self.row)
+        index = source_episode_index(self.config, self.row, self.config_dir)
         return self._cached("source", lambda: reference_frames(self.config_dir, index))
 
     def actions(self, key: str = "action") -> np.ndarray:
@@ -108,11 +111,22 @@ def episode_actions(config_dir: Path, episode_index: int, key: str = "action") -
     return np.asarray(t.column(key).to_pylist(), dtype=np.float32).reshape(t.num_rows, -1)
 
 
-def source_episode_index(config: str, row: dict) -> int:
-    """The episode index of an instance's unperturbed source rollout: T1's `original` role, else the
-    instance column `source_episode_index`."""
+@functools.lru_cache(maxsize=8)
+def _t3_experts(config_dir: Path) -> dict[str, int]:
+    """T3: group_id → the episode index of the group's expert rollout."""
+    rows = pq.read_table(Path(config_dir) / INSTANCES, columns=["group_id", "source_group", "episode_indices"])
+    return {g: int(e[0]) for g, s, e in zip(*(rows.column(c).to_pylist() for c in rows.column_names))
+            if s == T3_SOURCE_GROUP}
+
+
+def source_episode_index(config: str, row: dict, config_dir: Path | None = None) -> int:
+    """The episode index of an instance's unperturbed source rollout: T1's `original` role; T3's canonical
+    execution, the expert of the same group (needs `config_dir`); else the instance column
+    `source_episode_index`."""
     if config.startswith(T1_PREFIX):
         return int(row["episode_indices"][list(row["roles"]).index(T1_SOURCE_ROLE)])
+    if config.startswith(T3_PREFIX) and config_dir is not None and row.get("group_id") in _t3_experts(config_dir):
+        return _t3_experts(Path(config_dir))[row["group_id"]]
     index = row.get(SOURCE_COLUMN)
     if index is None:
         raise BaselineError(f"{config}: the release has no source rollouts (no {SOURCE_COLUMN!r} for instance "

@@ -5,11 +5,12 @@ from __future__ import annotations
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.t1 import T1Builder
 from wsp_data.builders.t2 import T2Builder
+from wsp_data.builders.t3 import T3Builder
 from wsp_data.builders.t4 import T4Builder
 from wsp_data.builders.t5 import T5Builder
 from wsp_data.builders.train import TrainBuilder
 
-BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder, T2Builder, T4Builder, T5Builder, TrainBuilder)}
+BUILDERS: dict[str, type[SuiteBuilder]] = {b.suite: b for b in (T1Builder, T2Builder, T3Builder, T4Builder, T5Builder, TrainBuilder)}
 
 
 def builder_class(suite: str) -> type[SuiteBuilder]:

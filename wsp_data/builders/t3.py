@@ -1,0 +1,146 @@
+"""T3 Action-source behaviour preservation (SPEC §3 T3) on ManiSkill.
+
+Slots come in groups of eight that share task, episode and scene seed, one per source: the scripted expert,
+five scripted operator models H1–H5 (`wsp_data/sources/operators.py`), and an early and a late behaviour-
+cloning policy checkpoint (`wsp_data/sources/policies.py`). Slot k belongs to group g = k // 8, gets source
+`SOURCE_GROUPS[k % 8]` and task `tasks[g % len(tasks)]`.
+
+The group's scene seed is the first candidate `scene_seed("t3", 8·g, a)` (a = 0, 1, …) on which the expert
+succeeds and all eight streams replay validly without rendering (SPEC §5 common checks; successes and
+failures of operators and policies are both kept) and RMFA can score every one (≥ 1 window with active robot
+pixels). Every slot of the group evaluates the same candidates in the same order (the outcome is cached per
+worker), so all eight land on the same seed; slot k's attempt a uses candidate a and renders only its own
+stream. Columns: `source_group`, `source_kind` (scripted_expert / scripted_operator / bc_policy / human_teleop),
+`source_provenance` (JSON: operator parameters, or checkpoint, training steps and measured success),
+`group_id` (task and seed), `source_success`, `steps`.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache, TaskRig
+from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, scene_seed
+from wsp_data.staging import RolloutArrays
+from wsp_eval.flow import active_pixels_per_window, reference_flows
+
+T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
+OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # `wsp_data.sources.operators.OPERATORS` (tested)
+POLICY_GROUPS = ("policy_early", "policy_late")  # `wsp_data.sources.policies.STAGES` (tested)
+SOURCE_GROUPS = ("expert", *OPERATOR_GROUPS, *POLICY_GROUPS)
+GROUP_SIZE = len(SOURCE_GROUPS)
+
+
+class _Rig(TaskRig):
+    """One task's expert, operators and policies, with unrendered and rendered replays."""
+
+    def __init__(self, task: str):
+        super().__init__(task)
+        self._sources: dict[str, object] = {}
+
+    def source(self, group: str):
+        if group not in self._sources:
+            if group in OPERATOR_GROUPS:
+                from wsp_data.sources.operators import OperatorSource
+
+                self._sources[group] = OperatorSource(self.spec.name, group)
+            else:
+                from wsp_data.sources.policies import PolicySource
+
+                self._sources[group] = PolicySource(self.spec.name, group.removeprefix("policy_"))
+        return self._sources[group]
+
+    def stream(self, group: str, seed: int) -> tuple[np.ndarray | None, dict]:
+        """The group's action stream on `seed` and its provenance (stream None: the source produced none)."""
+        if group == "expert":
+            return self.expert.trajectory(seed), {"kind": "scripted_expert", "script": f"experts.{self.spec.name}"}
+        src = self.source(group)
+        if group in OPERATOR_GROUPS:
+            actions = src.attempt(seed).actions  # failures are kept: the caller replays and records success
+        else:
+            actions, _ = src.trajectory(seed)
+        return actions, src.provenance
+
+    def close(self) -> None:
+        for s in self._sources.values():
+            s.close()
+        super().close()
+
+
+def source_kind(provenance: dict) -> str:
+    return provenance.get("kind", "unknown")
+
+
+class T3Builder(SuiteBuilder):
+    suite = "t3"
+    title = "T3 Action-source behaviour preservation"
+    description = ("Groups of eight rollouts sharing task, episode and scene seed, one per action source: the "
+                   "scripted expert, scripted operator models H1-H5 (distinct speed, jerkiness, hesitation and "
+                   "re-approach, approach direction) and an early and a late behaviour-cloning policy checkpoint; "
+                   "successes and failures kept. Columns `source_group`, `source_kind`, `source_provenance`, "
+                   "`group_id`. Score: RMFA, per source group and overall.")
+    roles = ("reference",)
+
+    def __init__(self, config: BuildConfig):
+        super().__init__(config)
+        self.tasks = tuple(t for t in dict.fromkeys(config.tasks) if t in T3_TASKS)
+        if not self.tasks:
+            raise ValueError(f"T3 runs on {', '.join(T3_TASKS)} (trained policies and operator models); none selected")
+        self.rig = RigCache(_Rig)
+        self._groups: dict[tuple[str, int], dict | str] = {}
+
+    def close(self) -> None:
+        self.rig.close()
+
+    def plan(self, slot: int) -> SlotPlan:
+        return SlotPlan(self.tasks[(slot // GROUP_SIZE) % len(self.tasks)], SOURCE_GROUPS[slot % GROUP_SIZE])
+
+    def group(self, task: str, seed: int) -> dict | str:
+        """All eight streams of a candidate group seed, validated unrendered, or the reason it is unusable."""
+        key = (task, seed)
+        if key not in self._groups:
+            self._groups[key] = self._validate_group(task, seed)
+        return self._groups[key]
+
+    def _validate_group(self, task: str, seed: int) -> dict | str:
+        rig = self.rig(task)
+        streams = {}
+        for group in SOURCE_GROUPS:
+            actions, provenance = rig.stream(group, seed)
+            if actions is None:
+                return "expert_failed" if group == "expert" else f"{group}_no_stream"
+            ro = rig.state.replay(seed, actions)
+            if group == "expert" and not ro.success:
+                return "expert_failed"
+            if (why := rig.invalid(ro)) is not None:
+                return f"{group}_{why}"
+            streams[group] = (actions, provenance, bool(ro.success))
+        return streams
+
+    def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        slot, attempt = divmod(seed - SEED_BASE["t3"], MAX_ATTEMPTS)
+        group_seed = scene_seed("t3", GROUP_SIZE * (slot // GROUP_SIZE), attempt)
+        streams = self.group(plan.task, group_seed)
+        if isinstance(streams, str):
+            return Dropped(f"group_{streams}")
+        actions, provenance, success = streams[plan.group]
+        rig = self.rig(plan.task)
+        ro = rig.render.replay(group_seed, actions)
+        steps = len(actions)
+        if (why := rig.invalid(ro)) is not None:
+            return Dropped(f"rendered_{why}", steps)
+        active = active_pixels_per_window(*reference_flows(ro.stack("rgb"), ro.stack("mask"), FPS))
+        if not (active > 0).any():
+            return Dropped("no_scorable_motion", steps)
+        row = {
+            "task": plan.task, "seed": group_seed, "instruction": rig.spec.instruction,
+            "objects": list(rig.spec.objects), "source": f"{source_kind(provenance)}:{plan.group}",
+            "source_group": plan.group, "source_kind": source_kind(provenance),
+            "source_provenance": json.dumps(provenance, sort_keys=True), "group_id": f"{plan.task}:{group_seed}",
+            "source_success": success, "steps": steps, "active_windows": int((active > 0).sum()),
+            "interventions": {"reference": {"source_group": plan.group}},
+        }
+        return Kept(row, [RolloutArrays.from_rollout("reference", ro)], steps)
