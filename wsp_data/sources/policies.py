@@ -1,8 +1,9 @@
 """Learned policy sources for T3: behaviour-cloned MLPs from simulator state to the 8-D joint action.
 
 For each T3 task a small MLP was trained (`scripts/train_policies.py`, CPU, fixed seeds) on replay-verified
-scripted expert trajectories of training seeds (`ExpertSource`), and two checkpoints were kept: an *early*
-one (a few percent of training: visibly worse) and the *late* (final) one. `PolicySource(task, stage)` loads
+scripted expert trajectories of training seeds (`ExpertSource`) plus noise-injected re-executions of them,
+and two checkpoints were kept: an *early* one (10% of training) and the *late* (final) one; docs/policies.md
+has their measured success. `PolicySource(task, stage)` loads
 `wsp_data/sources/checkpoints/<task>_<stage>.pt` and runs the policy closed-loop in its own state-only
 `ManiSkillPlatform`; the returned stream is a plain `pd_joint_pos` stream that `ManiSkillPlatform.replay`
 reproduces state for state (every episode starts from a rebuilt scene, and CPU PhysX is deterministic).
