@@ -9,7 +9,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from wsp_eval.backends.errors import BackendUnavailable
+from wsp_eval.backends.errors import BackendUnavailable, local_checkpoint
 
 
 class DISFlow:
@@ -40,13 +40,8 @@ class DPFlow:
     name = "dpflow"
 
     def __init__(self, checkpoint: str | Path | None = None, device: str | None = None):
-        if checkpoint is None:
-            raise BackendUnavailable("flow backend 'dpflow' needs a local checkpoint: --flow-checkpoint PATH "
-                                     "(e.g. dpflow-things.ckpt from ptlflow's model zoo, downloaded beforehand)")
-        path = Path(checkpoint)
-        if not path.is_file():
-            raise BackendUnavailable(f"flow backend 'dpflow': checkpoint {path} not found (nothing is downloaded "
-                                     "at run time; fetch it once and pass its path)")
+        path = local_checkpoint(checkpoint, "flow backend 'dpflow'", "--flow-checkpoint",
+                                "e.g. dpflow-things.ckpt from ptlflow's model zoo")
         try:
             import ptlflow
             import torch

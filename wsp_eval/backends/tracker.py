@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from wsp_eval import tracking
-from wsp_eval.backends.errors import BackendUnavailable
+from wsp_eval.backends.errors import BackendUnavailable, local_checkpoint
 
 
 class LKTracker:
@@ -42,13 +42,8 @@ class TAPNextTracker:
     VISIBLE = 0.5
 
     def __init__(self, checkpoint: str | Path | None = None, device: str | None = None):
-        if checkpoint is None:
-            raise BackendUnavailable("tracker backend 'tapnext' needs a local checkpoint: --tracker-checkpoint PATH "
-                                     "(e.g. bootstapnext_ckpt.npz from the tapnet repository, downloaded beforehand)")
-        path = Path(checkpoint)
-        if not path.is_file():
-            raise BackendUnavailable(f"tracker backend 'tapnext': checkpoint {path} not found (nothing is downloaded "
-                                     "at run time; fetch it once and pass its path)")
+        path = local_checkpoint(checkpoint, "tracker backend 'tapnext'", "--tracker-checkpoint",
+                                "e.g. bootstapnext_ckpt.npz from the tapnet repository")
         try:
             import torch
             from tapnet.tapnext.tapnext_torch import TAPNext
