@@ -42,6 +42,17 @@ from wsp_data.sources.policies import (  # noqa: E402
 EVAL_SEED_BASE = 910_000
 
 
+def _record(rows: dict, ob, goal, step: int, action: np.ndarray, episode: int) -> None:
+    """Append one (state, labelled action) sample to the dataset columns."""
+    rows["qpos"].append(ob.qpos)
+    rows["tcp"].append(ob.tcp_pose)
+    rows["objects"].append(ob.object_poses)
+    rows["goal"].append(np.zeros(3, np.float32) if goal is None else goal)
+    rows["step"].append(step)
+    rows["action"].append(action)
+    rows["episode"].append(episode)
+
+
 def collect(task: str, demos: int, cache: Path | None, log) -> dict:
     """`demos` verified expert episodes with their states: per step qpos, tcp, object poses, goal, action."""
     path = cache / f"{task}_demos{demos}.npz" if cache else None
@@ -65,13 +76,7 @@ def collect(task: str, demos: int, cache: Path | None, log) -> dict:
             ob = p.reset(seed)
             goal = read_goal(p, task)
             for t, a in enumerate(actions):
-                rows["qpos"].append(ob.qpos)
-                rows["tcp"].append(ob.tcp_pose)
-                rows["objects"].append(ob.object_poses)
-                rows["goal"].append(np.zeros(3, np.float32) if goal is None else goal)
-                rows["step"].append(t)
-                rows["action"].append(a)
-                rows["episode"].append(len(seeds))
+                _record(rows, ob, goal, t, a, len(seeds))
                 ob = p.step(a)
             if not ob.success:  # cannot happen: trajectory() verified this very replay
                 raise RuntimeError(f"{task} seed {seed}: expert replay did not succeed")
@@ -114,13 +119,7 @@ def collect_noisy(task: str, d: dict, rollouts: int, sigma: float, rho: float, c
                 ob = p.reset(int(seed))
                 goal = read_goal(p, task)
                 for t, a in enumerate(nominal):
-                    rows["qpos"].append(ob.qpos)
-                    rows["tcp"].append(ob.tcp_pose)
-                    rows["objects"].append(ob.object_poses)
-                    rows["goal"].append(np.zeros(3, np.float32) if goal is None else goal)
-                    rows["step"].append(t)
-                    rows["action"].append(a)
-                    rows["episode"].append(n + i * rollouts + k)
+                    _record(rows, ob, goal, t, a, n + i * rollouts + k)
                     eps = rho * eps + np.sqrt(1 - rho ** 2) * sigma * rng.standard_normal(7)
                     ob = p.step(np.concatenate([a[:7] + eps, a[7:]]).astype(np.float32))
             if (i + 1) % 20 == 0:
