@@ -54,7 +54,7 @@ def test_ee_action_is_forward_kinematics_of_the_joint_target(pick):
     p, ro, actions = pick
     base = p.robot.pose.p[0].numpy()
     tcp_in_base = ro.observations[-1].tcp_pose[:3] - base  # the base is unrotated in PickCube
-    assert np.linalg.norm(ro.ee_actions[-1][:3] - tcp_in_base) < 0.005
+    assert np.linalg.norm(ro.alt_actions[-1][:3] - tcp_in_base) < 0.005
 
 
 def test_replay_is_bit_identical_and_history_free(pick):

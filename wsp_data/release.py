@@ -113,11 +113,11 @@ def _ignored(rel: Path) -> bool:
 def _render_card(root: Path, release: dict, card_configs: list[dict]) -> None:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(CARDS_DIR), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
-    platform = PLATFORM_INFO[card_configs[0]["platform"]]
+    platforms = [PLATFORM_INFO[p] for p in dict.fromkeys(c["platform"] for c in card_configs)]
     text = env.get_template("dataset_card.md.j2").render(
         name=root.name, version=release["version"], code_version=release["code_version"],
-        codebase_version=CODEBASE_VERSION, configs=card_configs, fps=platform.fps, max_objects=MAX_OBJECTS,
-        simulator="ManiSkill 3.0.1 on SAPIEN 3.0.3",
+        codebase_version=CODEBASE_VERSION, configs=card_configs, fps=platforms[0].fps, max_objects=MAX_OBJECTS,
+        platforms=platforms,
     )
     (root / CARD).write_text(text)
 
@@ -136,7 +136,7 @@ def _write_croissant(root: Path, release: dict, card_configs: list[dict]) -> Non
                           "sha256": sha256(root / c["name"] / INSTANCES)} for c in card_configs],
         "recordSet": [{"@type": "cr:RecordSet", "@id": c["name"], "name": c["name"],
                        "description": c["suite_description"]} for c in card_configs],
-        "rai:dataCollection": "Generated in simulation (ManiSkill3/SAPIEN, CPU) from scripted expert trajectories "
+        "rai:dataCollection": "Generated in simulation (ManiSkill3/SAPIEN and LIBERO/MuJoCo, CPU) from scripted expert trajectories "
                               "and controlled interventions; validated from simulator state.",
         "rai:dataCollectionType": "Simulation",
         "rai:personalSensitiveInformation": "None: no people, no personal data.",

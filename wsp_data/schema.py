@@ -30,7 +30,7 @@ EPISODE_ID = "episode_{index:06d}"  # submission path component: <config>/<episo
 INSTANCE_ID = "{config}/{slot:06d}"
 
 SUITES = ("t1", "t2", "t3", "t4", "t5", "train")
-PLATFORMS = ("maniskill",)
+PLATFORMS = ("maniskill", "libero")
 
 # Disjoint scene-seed ranges: a suite's slot k, attempt a uses base + 100·k + a (a < MAX_ATTEMPTS).
 MAX_ATTEMPTS = 100
@@ -48,25 +48,28 @@ def scene_seed(suite: str, slot: int, attempt: int) -> int:
 
 
 # -- per-frame features (LeRobot) ---------------------------------------------------------------------
-VIDEO_KEY = "observation.images.base_camera"
+VIDEO_KEY = "observation.images.base_camera"  # ManiSkill's; a platform's own is `PLATFORM_INFO[p].video_key`
 MASK_KEY = "observation.robot_mask"
 
 
-def frame_features() -> dict:
-    """LeRobot feature spec of every rollout frame. Frame t holds the observation at t and the action
-    applied after it; the last frame's action repeats the previous one and is never executed."""
+def frame_features(platform: str = "maniskill") -> dict:
+    """LeRobot feature spec of every rollout frame on `platform`. Frame t holds the observation at t and the
+    action applied after it; the last frame's action repeats the previous one and is never executed.
+    `action` is the platform's native stream; the other stream (`alt_action_key`) is stored beside it."""
+    info = PLATFORM_INFO[platform]
     img = (IMAGE_SIZE, IMAGE_SIZE, 3)
     hwc = ["height", "width", "channels"]
     return {
-        VIDEO_KEY: {"dtype": "video", "shape": img, "names": hwc},
+        info.video_key: {"dtype": "video", "shape": img, "names": hwc},
         # label image, the label in all three channels: 0 not robot, 1 arm, 2 wrist/hand/fingers
         MASK_KEY: {"dtype": "image", "shape": img, "names": hwc},
         "observation.state": {"dtype": "float32", "shape": (9,), "names": [f"q{i}" for i in range(7)] + ["finger_l", "finger_r"]},
         "observation.ee_pose": {"dtype": "float32", "shape": (7,), "names": ["x", "y", "z", "qw", "qx", "qy", "qz"]},
         "observation.object_poses": {"dtype": "float32", "shape": (MAX_OBJECTS * 7,), "names": None},
         "observation.contacts": {"dtype": "bool", "shape": (MAX_OBJECTS,), "names": None},
-        "action": {"dtype": "float32", "shape": (ACTION_DIM,), "names": [f"q{i}" for i in range(7)] + ["gripper"]},
-        "action.ee": {"dtype": "float32", "shape": (EE_ACTION_DIM,), "names": ["x", "y", "z", "rx", "ry", "rz", "gripper"]},
+        "action": {"dtype": "float32", "shape": (len(info.action_names),), "names": list(info.action_names)},
+        info.alt_action_key: {"dtype": "float32", "shape": (len(info.alt_action_names),),
+                              "names": list(info.alt_action_names)},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
 
@@ -83,15 +86,37 @@ EPISODE_COLUMNS = (
 
 @dataclass(frozen=True)
 class PlatformInfo:
+    """What a reader of a release needs to know about a platform (SPEC §2)."""
+
     name: str
     fps: int
     image_size: int
     camera: str
     robot_type: str
-    action_space: str
+    action_space: str  # the native stream, column `action`
+    action_names: tuple[str, ...]
+    alt_action_key: str  # the other stream stored beside it
+    alt_action_space: str
+    alt_action_names: tuple[str, ...]
+    simulator: str
+
+    @property
+    def video_key(self) -> str:
+        return f"observation.images.{self.camera}"
 
 
+_JOINTS = tuple(f"q{i}" for i in range(7))
+_EE_DELTA = ("dx", "dy", "dz", "drx", "dry", "drz", "gripper")
 PLATFORM_INFO = {
-    "maniskill": PlatformInfo("maniskill", FPS, IMAGE_SIZE, "base_camera", "panda",
-                              "pd_joint_pos: 7 joint position targets (rad) + gripper (1 open … -1 closed)"),
+    "maniskill": PlatformInfo(
+        "maniskill", FPS, IMAGE_SIZE, "base_camera", "panda",
+        "pd_joint_pos: 7 joint position targets (rad) + gripper (1 open … -1 closed)", _JOINTS + ("gripper",),
+        "action.ee", "TCP target in the robot base frame (m), XYZ Euler angles (rad), gripper (forward kinematics of "
+        "the joint targets)", ("x", "y", "z", "rx", "ry", "rz", "gripper"), "ManiSkill 3.0.1 on SAPIEN 3.0.3"),
+    "libero": PlatformInfo(
+        "libero", FPS, IMAGE_SIZE, "agentview", "panda",
+        "OSC_POSE deltas in [-1, 1]: end-effector position (x0.05 m), axis-angle rotation (x0.5 rad), gripper "
+        "(-1 open ... 1 closed)", _EE_DELTA,
+        "action.joint", "the 7 joint positions (rad) each action reached + the gripper command", _JOINTS + ("gripper",),
+        "LIBERO (hf-libero 0.1.4) on robosuite 1.4.0 / MuJoCo 3.8"),
 }

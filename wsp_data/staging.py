@@ -16,8 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_data.platforms.maniskill import Rollout
-
 SLOT_DIR = "slot_{slot:06d}"
 SLOT_JSON = "slot.json"
 CONFIG_JSON = "build_config.json"
@@ -36,16 +34,17 @@ class RolloutArrays:
     object_poses: np.ndarray
     contacts: np.ndarray
     success: np.ndarray
-    actions: np.ndarray
-    ee_actions: np.ndarray
+    actions: np.ndarray  # the platform's native stream
+    alt_actions: np.ndarray  # the other stream beside it (ManiSkill: end-effector; LIBERO: joint)
     intrinsic: np.ndarray
     extrinsic: np.ndarray
 
     @classmethod
-    def from_rollout(cls, role: str, ro: Rollout) -> RolloutArrays:
+    def from_rollout(cls, role: str, ro) -> RolloutArrays:
+        """From a platform `Rollout` (ManiSkill or LIBERO: the same fields)."""
         return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("qpos"), ro.stack("tcp_pose"),
                    ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
-                   ro.ee_actions, ro.intrinsic, ro.extrinsic)
+                   ro.alt_actions, ro.intrinsic, ro.extrinsic)
 
     @property
     def num_frames(self) -> int:

@@ -21,26 +21,26 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from wsp_data.schema import (
-    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, SOURCE_ROLE, VIDEO_KEY, frame_features,
+    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, SOURCE_ROLE, PlatformInfo, frame_features,
 )
 from wsp_data.staging import RolloutArrays, SlotRecord
 
 REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
 
 
-def _frames(r: RolloutArrays, instruction: str):
+def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
     last = len(r.actions) - 1
     for t in range(r.num_frames):
         a = min(t, last)  # the final frame repeats the last action (never executed)
         yield {
-            VIDEO_KEY: r.rgb[t],
+            info.video_key: r.rgb[t],
             MASK_KEY: np.repeat(r.mask[t][..., None], 3, axis=2),
             "observation.state": r.qpos[t],
             "observation.ee_pose": r.tcp_pose[t],
             "observation.object_poses": r.object_poses[t].reshape(-1),
             "observation.contacts": r.contacts[t],
             "action": r.actions[a],
-            "action.ee": r.ee_actions[a],
+            info.alt_action_key: r.alt_actions[a],
             "next.success": np.array([r.success[t]]),
             "task": instruction,
         }
@@ -57,7 +57,7 @@ def write_config(config_dir: Path, config: str, platform: str,
     shutil.rmtree(tmp, ignore_errors=True)
     logging.getLogger("lerobot").setLevel(logging.WARNING)
     ds = LeRobotDataset.create(
-        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(), root=tmp,
+        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(platform), root=tmp,
         robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
     )
     episode_rows: list[dict] = []
@@ -68,7 +68,7 @@ def write_config(config_dir: Path, config: str, platform: str,
         for r in rollouts:
             index = len(episode_rows)
             with contextlib.redirect_stderr(io.StringIO()):
-                for frame in _frames(r, row["instruction"]):
+                for frame in _frames(r, row["instruction"], info):
                     ds.add_frame(frame)
                 ds.save_episode(parallel_encoding=False)
             indices.append(index)

@@ -79,7 +79,7 @@ class EpisodeContext:
         return self._cached("source", lambda: reference_frames(self.config_dir, index))
 
     def actions(self, key: str = "action") -> np.ndarray:
-        """The episode's action stream `key` (`action` or `action.ee`), float32 (T, D)."""
+        """The episode's action stream `key` (`action`, or `action.ee` / `action.joint`), float32 (T, D)."""
         return self._cached(f"actions/{key}", lambda: episode_actions(self.config_dir, self.episode_index, key))
 
     def rng(self) -> np.random.Generator:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_data.schema import MASK_KEY, VIDEO_KEY
+from wsp_data.schema import MASK_KEY
 from wsp_eval.video import VideoError
 
 
@@ -27,6 +27,14 @@ def episodes(config_dir: Path) -> dict[int, dict]:
     return rows
 
 
+def video_key_of(info: dict) -> str:
+    """The one video feature of a config's `meta/info.json` (the platform's evaluated camera)."""
+    keys = [k for k, f in info["features"].items() if f["dtype"] == "video"]
+    if len(keys) != 1:
+        raise VideoError(f"expected one video feature in meta/info.json, found {keys}")
+    return keys[0]
+
+
 def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
     """The reference video of one episode, RGB uint8 (length, H, W, 3), decoded from its shared file."""
     import av
@@ -34,8 +42,9 @@ def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
     config_dir = Path(config_dir)
     ep = episodes(config_dir)[episode_index]
     info = json.loads((config_dir / "meta" / "info.json").read_text())
-    key = f"videos/{VIDEO_KEY}"
-    path = config_dir / info["video_path"].format(video_key=VIDEO_KEY, chunk_index=ep[f"{key}/chunk_index"],
+    video_key = video_key_of(info)
+    key = f"videos/{video_key}"
+    path = config_dir / info["video_path"].format(video_key=video_key, chunk_index=ep[f"{key}/chunk_index"],
                                                   file_index=ep[f"{key}/file_index"])
     start, fps, n = ep[f"{key}/from_timestamp"], info["fps"], ep["length"]
     first = int(round(start * fps))

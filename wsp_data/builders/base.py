@@ -116,8 +116,12 @@ class SuiteBuilder(ABC):
     title: ClassVar[str]
     description: ClassVar[str]
     roles: ClassVar[tuple[str, ...]]
+    platforms: ClassVar[frozenset[str]] = frozenset({"maniskill"})  # platforms this builder is written for
 
     def __init__(self, config: BuildConfig):
+        if config.platform not in self.platforms:
+            raise ValueError(f"{self.suite} has no {config.platform} builder yet; it builds for "
+                             f"{', '.join(sorted(self.platforms))}")
         self.config = config
 
     def plan(self, slot: int) -> SlotPlan:

@@ -5,29 +5,35 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
+import numpy as np
+
 from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
-from wsp_data.sources.experts import ExpertSource, task_spec
+from wsp_data.platforms import PlatformKit, kit
+
+
+def rollout_problem(k: PlatformKit, qlimits: np.ndarray, ro) -> str | None:
+    """The common validity checks (SPEC §5) of a platform rollout, read the way its platform needs."""
+    return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), k.joint_stream(ro),
+                         qlimits, ro.actions, k.action_bounds)
 
 
 class TaskRig:
     """The simulator resources of one task in one worker: expert source, unrendered and rendered replays."""
 
-    def __init__(self, task: str):
-        spec = task_spec(task)
-        self.spec = spec
-        self.expert = ExpertSource(task)
+    def __init__(self, task: str, platform: str = "maniskill"):
+        self.kit = kit(platform)
+        self.expert = self.kit.make_expert(task)
+        self.spec = self.expert.spec
         self.state = self.expert.replayer
-        self.render = ManiSkillPlatform(task, render=True, objects=spec.objects)
-        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+        self.render = self.kit.make_renderer(task, self.spec.objects)
+        self.qlimits = self.state.qlimits
 
     def close(self) -> None:
         self.expert.close()
         self.render.close()
 
-    def invalid(self, ro: Rollout) -> str | None:
-        return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
-                             self.qlimits)
+    def invalid(self, ro) -> str | None:
+        return rollout_problem(self.kit, self.qlimits, ro)
 
 
 R = TypeVar("R")

@@ -8,6 +8,7 @@ drop reason in the build report. Thresholds:
 - `instability`: a task object moving faster than 3 m/s between frames, leaving the workspace
   (|x|, |y| > 1.5 m) or sinking below the table (z < −0.05 m); a robot joint faster than 10 rad/s.
 - `incomplete`: fewer frames than actions + 1.
+- `action_limit`: a native action outside the range its controller accepts unclipped (LIBERO's OSC: [−1, 1]).
 """
 
 from __future__ import annotations
@@ -24,11 +25,15 @@ JOINT_LIMIT_TOL = 0.01  # rad
 
 
 def check_rollout(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarray, actions: np.ndarray,
-                  qlimits: np.ndarray) -> str | None:
-    """qpos (T+1, 9), tcp_pose (T+1, 7), object_poses (T+1, K, 7) NaN-padded, actions (T, 8),
-    qlimits (9, 2) lower/upper."""
+                  qlimits: np.ndarray, native: np.ndarray | None = None,
+                  bounds: tuple[float, float] | None = None) -> str | None:
+    """qpos (T+1, 9), tcp_pose (T+1, 7), object_poses (T+1, K, 7) NaN-padded, actions (T, ≥7) joint targets
+    (on LIBERO: the joint positions reached), qlimits (9, 2) lower/upper; `native` (T, D) with `bounds`: the
+    native stream and the range its controller accepts."""
     if len(qpos) != len(actions) + 1:
         return "incomplete"
+    if native is not None and bounds is not None and ((native < bounds[0]).any() or (native > bounds[1]).any()):
+        return "action_limit"
     used = ~np.isnan(object_poses[0, :, 0])
     objs = object_poses[:, used]
     if not (np.isfinite(qpos).all() and np.isfinite(tcp_pose).all() and np.isfinite(objs).all()):

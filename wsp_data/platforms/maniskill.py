@@ -116,7 +116,7 @@ class Rollout:
     task: str
     seed: int
     actions: np.ndarray  # (T, 8) float32 joint-space stream as executed
-    ee_actions: np.ndarray  # (T, 7) float32 end-effector stream (FK of the joint targets)
+    alt_actions: np.ndarray  # (T, 7) float32 end-effector stream (FK of the joint targets), column action.ee
     observations: list[Observation] = field(default_factory=list)
     intrinsic: np.ndarray | None = None  # (3, 3) OpenCV intrinsics
     extrinsic: np.ndarray | None = None  # (3, 4) OpenCV world→camera
@@ -175,6 +175,11 @@ class ManiSkillPlatform:
     @property
     def robot(self):
         return self.u.agent.robot
+
+    @property
+    def qlimits(self) -> np.ndarray:
+        """(9, 2) lower/upper limits of the 7 arm and 2 finger joints."""
+        return _np(self.robot.get_qlimits()[0])
 
     def actor(self, name: str) -> Actor:
         a = getattr(self.u, name, None)
