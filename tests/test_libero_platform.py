@@ -1,0 +1,157 @@
+"""The LIBERO platform on real MuJoCo scenes: determinism, the robot mask, camera parameters, contacts, the
+joint stream beside the native OSC stream, the scripted expert, and a non-interactive first import."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import mujoco
+import numpy as np
+import pytest
+
+from conftest import LIBERO_TASKS
+
+from wsp_data.platforms.libero import JOINT_ACTION_DIM, MASK_DISTAL, LiberoPlatform, PlatformError
+from wsp_data.sources.libero_experts import TASKS, LiberoExpertSource, task_spec
+
+TASK = LIBERO_TASKS[0]
+
+
+@pytest.fixture(scope="module")
+def expert():
+    src = LiberoExpertSource(TASK)
+    yield src
+    src.close()
+
+
+@pytest.fixture(scope="module")
+def render():
+    with LiberoPlatform(TASK, render=True, objects=task_spec(TASK).objects) as p:
+        yield p
+
+
+def test_registry_lists_forty_solvable_tasks():
+    assert len(TASKS) == 40 and len(set(TASKS)) == 40
+    assert set(LIBERO_TASKS) <= set(TASKS)
+    for name, spec in TASKS.items():
+        assert spec.name == name and spec.relation in ("in", "on") and spec.objects[0] == spec.target
+
+
+def test_expert_stream_is_a_verified_success_and_replays_bit_identically(expert, render):
+    actions = expert.trajectory(0)
+    assert actions is not None and actions.shape[1] == 7 and actions.dtype == np.float32
+    assert np.abs(actions[:, :6]).max() <= 0.9 + 1e-6  # headroom for T1's perturbations inside [-1, 1]
+    a = render.replay(0, actions)
+    other = render.replay(1, actions[:20])  # an unrelated episode in between must not leak into the next
+    b = render.replay(0, actions)
+    assert a.success and b.success and not other.observations[0].success
+    for key in ("qpos", "tcp_pose", "object_poses", "contacts", "rgb", "mask"):
+        assert np.array_equal(a.stack(key), b.stack(key), equal_nan=True), key
+    # unrendered replay (the expert's own env) ends in the same state as the rendered one
+    s = expert.replayer.replay(0, actions)
+    assert np.array_equal(s.stack("object_poses"), a.stack("object_poses"), equal_nan=True)
+
+
+def test_scene_seeds_lay_out_different_scenes_and_leave_numpy_alone(render):
+    np.random.seed(123)
+    before = np.random.random()
+    np.random.seed(123)
+    p0, p1 = render.reset(5).object_poses, render.reset(6).object_poses
+    assert np.random.random() == before  # the global RNG LIBERO's samplers use was restored
+    # LIBERO's samplers jitter each object within its BDDL region (this task's target region is fixed by
+    # LIBERO; the basket moves by up to ~2 cm)
+    assert np.nanmax(np.linalg.norm(p0[:, :3] - p1[:, :3], axis=1)) > 0.003
+    assert np.array_equal(render.reset(5).object_poses, p0, equal_nan=True)
+
+
+def test_scene_layout_does_not_depend_on_what_ran_before(render):
+    """A scene first laid out after another episode (gripper closed, arm elsewhere) equals one laid out by a
+    fresh env: robosuite's gripper ramp would otherwise carry over into the settle steps."""
+    render.replay(0, np.tile(np.array([[0.3, 0.2, -0.2, 0, 0, 0.3, 1.0]], np.float32), (30, 1)))
+    used = render.reset(77)
+    with LiberoPlatform(TASK, render=False, objects=task_spec(TASK).objects) as fresh:
+        first = fresh.reset(77)
+    for key in ("qpos", "tcp_pose", "object_poses"):
+        assert np.array_equal(getattr(used, key), getattr(first, key), equal_nan=True), key
+
+
+def test_several_rendering_envs_in_one_process_render_their_own_scene(render):
+    """robosuite renders into whichever GL context is current; the platform makes its own current first."""
+    before = render.reset(3)
+    with LiberoPlatform(LIBERO_TASKS[1], render=True) as other:
+        other.reset(3)
+        after = render.reset(3)
+    assert np.array_equal(before.rgb, after.rgb) and np.array_equal(before.mask, after.mask)
+
+
+def test_joint_stream_holds_the_positions_each_action_reached(expert):
+    actions = expert.trajectory(0)[:30]
+    ro = expert.replayer.replay(0, actions)
+    assert ro.alt_actions.shape == (30, JOINT_ACTION_DIM)
+    assert np.array_equal(ro.alt_actions[:, :7], ro.stack("qpos")[1:, :7])
+    assert np.array_equal(ro.alt_actions[:, 7], actions[:, 6])
+
+
+def test_mask_and_camera_agree_with_the_scene(render):
+    ob = render.reset(0)
+    assert ob.rgb.shape == (128, 128, 3) and ob.mask.shape == (128, 128)
+    assert set(np.unique(ob.mask)) == {0, 1, 2}
+    K, E = render.camera_params()
+
+    def project(p):
+        c = E[:, :3] @ p + E[:, 3]
+        return (K @ c)[:2] / c[2]
+
+    # the hand body projects onto a pixel labelled "wrist/hand/fingers" (the image is upright, v down)
+    hand = mujoco.mj_name2id(render.model, mujoco.mjtObj.mjOBJ_BODY, "robot0_right_hand")
+    u, v = np.round(project(render.data.xpos[hand])).astype(int)
+    assert ob.mask[v - 1:v + 2, u - 1:u + 2].max() == MASK_DISTAL
+    # a task object's centre projects within 2 px of the centroid of its own segmentation; the object's
+    # labels are produced by the same renderer path as the robot mask (tolerance: its body origin is its
+    # centre of mass to within a few mm, ~1 px at this distance)
+    saved = render.geom_label
+    try:
+        render.geom_label = (render.geom_object == 0).astype(np.uint8)
+        _, own = render.render_frame()
+    finally:
+        render.geom_label = saved
+    ys, xs = np.nonzero(own)
+    assert len(xs) > 30
+    assert np.linalg.norm(project(ob.object_poses[0, :3]) - [xs.mean(), ys.mean()]) < 2.0
+
+
+def test_contacts_flag_the_grasp(expert):
+    actions = expert.trajectory(0)
+    ro = expert.replayer.replay(0, actions)
+    touch = ro.stack("contacts")[:, 0]
+    assert not touch[0] and touch.any()
+    z = ro.stack("object_poses")[:, 0, 2]
+    carried = (z > z[0] + 0.05) & (np.r_[actions[:, 6], actions[-1, 6]] > 0)  # lifted, gripper commanded closed
+    assert carried.sum() > 20 and touch[carried].all()  # while the target is carried, the fingers touch it
+
+
+def test_bad_input_fails_clearly(render):
+    with pytest.raises(PlatformError, match=r"expected a \(T, 7\) action stream"):
+        render.replay(0, np.zeros((5, 8), np.float32))
+    with pytest.raises(PlatformError, match="NaN"):
+        render.replay(0, np.full((5, 7), np.nan, np.float32))
+    with pytest.raises(PlatformError, match="unknown LIBERO task"):
+        LiberoPlatform("PickCube")
+    with pytest.raises(PlatformError, match="has no task"):
+        LiberoPlatform("libero_object/no_such_task")
+
+
+def test_first_import_is_non_interactive(tmp_path):
+    """A fresh HOME and no ~/.libero: importing the platform must neither prompt (stdin is closed) nor try
+    the network (offline), and must find the scene assets."""
+    env = {**os.environ, "HOME": str(tmp_path), "HF_HUB_OFFLINE": "1", "TMPDIR": str(tmp_path)}
+    env.pop("LIBERO_CONFIG_PATH", None)
+    code = ("from wsp_data.platforms.libero import LiberoPlatform;"
+            f"p = LiberoPlatform({TASK!r}); print('frame', p.reset(0).rgb.mean() > 0)")
+    out = subprocess.run([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "frame True" in out.stdout
+    assert (tmp_path / f"wsp-libero-{os.getuid()}" / "config.yaml").exists()
