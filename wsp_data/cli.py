@@ -19,7 +19,10 @@ from pathlib import Path
 
 from wsp_data.schema import DEFAULT_RELEASE_NAME, PLATFORMS, SUITES
 
-PAPER_COUNTS = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360}  # ManiSkill, paper Table S3
+PAPER_COUNTS = {  # paper Table S3 (SPEC §3)
+    "maniskill": {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360},
+    "libero": {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000},
+}
 
 
 class CliError(Exception):
@@ -65,6 +68,7 @@ def parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="summarise a release folder")
     i.add_argument("release", type=Path)
     s = sub.add_parser("sources", help="scripted expert success rate per task")
+    s.add_argument("--platform", choices=PLATFORMS, default="maniskill")
     s.add_argument("--seeds", type=_positive, default=20)
     s.add_argument("--tasks", nargs="+")
     s.add_argument("--out", type=Path, help="also write the Markdown table here")
@@ -83,8 +87,9 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--out", type=Path, required=True)
     g.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     g.add_argument("--configs", nargs="+", help="only these configs (default: every scored config)")
-    g.add_argument("--action-key", default="action", choices=("action", "action.ee"),
-                   help="joint-space (default) or end-effector action stream")
+    g.add_argument("--action-key", default="action", choices=("action", "action.ee", "action.joint"),
+                   help="the native stream (default) or the one stored beside it: action.ee on ManiSkill, "
+                        "action.joint on LIBERO")
     g.add_argument("--quiet", action="store_true")
     sc = sub.add_parser("score", help="score a submission against a release; write JSON, Markdown and HTML reports")
     sc.add_argument("submission", type=Path)
@@ -127,18 +132,22 @@ def cmd_build(args) -> int:
     from wsp_data.build import BuildError, build, format_report
     from wsp_data.builders import BuildConfig, builder_class
     from wsp_data.builders.train import EPISODES_PER_TASK
-    from wsp_data.sources.experts import TASKS
+    from wsp_data.platforms import kit
 
     try:
         builder_class(args.suite)
+        known = kit(args.platform).tasks()
     except KeyError as e:
         raise CliError(e.args[0]) from None
-    tasks = tuple(args.tasks or TASKS)
-    unknown = [t for t in tasks if t not in TASKS]
+    except ImportError as e:
+        raise CliError(f"the {args.platform} platform is not installed ({e}); run `make setup`") from None
+    tasks = tuple(args.tasks or known)
+    unknown = [t for t in tasks if t not in known]
     if unknown:
-        raise CliError(f"unknown task(s) {', '.join(unknown)}; known: {', '.join(TASKS)}")
+        listed = "\n  ".join(known)
+        raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
     try:
-        count = args.count or PAPER_COUNTS.get(args.suite) or EPISODES_PER_TASK * len(tasks)
+        count = args.count or PAPER_COUNTS[args.platform].get(args.suite) or EPISODES_PER_TASK * len(tasks)
         config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet)
@@ -175,7 +184,7 @@ def cmd_info(args) -> int:
 def cmd_sources(args) -> int:
     from wsp_data.sources import survey
 
-    argv = ["--seeds", str(args.seeds)] + (["--tasks", *args.tasks] if args.tasks else [])
+    argv = ["--platform", args.platform, "--seeds", str(args.seeds)] + (["--tasks", *args.tasks] if args.tasks else [])
     argv += ["--out", str(args.out)] if args.out else []
     return survey.main(argv) or 0
 

@@ -1,10 +1,11 @@
 """Survey the scripted experts: per task, how many seeds script into a replay-verified success, how long the
 trajectories are and what one costs.
 
-    python -m wsp_data.sources.survey [--seeds 20] [--tasks PickCube StackCube …] [--out docs/experts.md]
+    python -m wsp_data.sources.survey [--platform maniskill|libero] [--seeds 20] [--tasks …] [--out docs/experts.md]
 
-prints a Markdown table (and writes it to `--out`). Every seed goes through `ExpertSource.trajectory`: script
-under `pd_ee_pose`, replay under `pd_joint_pos`, keep only if the replay ends in task success.
+prints a Markdown table (and writes it to `--out`). Every seed goes through the platform's expert source:
+on ManiSkill, script under `pd_ee_pose`, replay under `pd_joint_pos`, keep only if the replay ends in task
+success; on LIBERO, the closed-loop OSC script, kept only on task success.
 """
 
 from __future__ import annotations
@@ -17,12 +18,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from wsp_data.sources.experts import TASKS, ExpertSource, task_spec
+from wsp_data.platforms import KITS, kit
 
 COLUMNS = ("task", "seeds", "successes", "success rate", "mean length (steps)", "max length", "s / trajectory")
 
 
-def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True) -> list[dict]:
+def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True,
+           platform: str = "maniskill") -> list[dict]:
     """Script and verify every seed of every task; one summary row per task.
 
     Row keys: `task`, `seeds` (tried), `successes`, `success_rate`, `mean_length` and `max_length` (steps of
@@ -30,14 +32,13 @@ def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True)
     replay, per seed tried).
     """
     seeds = list(seeds)
-    for name in tasks:
-        task_spec(name)  # fail fast on an unknown task
+    k = kit(platform)
     rows = []
     with tqdm(total=len(tasks) * len(seeds), desc="experts", unit="traj", file=sys.stderr,
               disable=not progress) as bar:
         for name in tasks:
             bar.set_postfix_str(name)
-            source = ExpertSource(name)
+            source = k.make_expert(name)
             lengths, seconds = [], 0.0
             try:
                 for seed in seeds:
@@ -71,12 +72,17 @@ def markdown(rows: Sequence[dict]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m wsp_data.sources.survey", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--platform", choices=tuple(KITS), default="maniskill")
     ap.add_argument("--seeds", type=int, default=20, help="seeds 0..N-1 per task (default 20)")
     ap.add_argument("--tasks", nargs="+", default=None, metavar="TASK",
-                    help=f"tasks to survey (default: all registered: {', '.join(TASKS)})")
+                    help="tasks to survey (default: the platform's registered benchmark tasks)")
     ap.add_argument("--out", type=Path, default=None, help="also write the Markdown table to this file")
     args = ap.parse_args(argv)
-    table = markdown(survey(args.tasks or list(TASKS), range(args.seeds)))
+    known = kit(args.platform).tasks()
+    unknown = [t for t in args.tasks or () if t not in known and args.platform == "maniskill"]
+    if unknown:
+        ap.error(f"unknown task(s) {', '.join(unknown)}; known: {', '.join(known)}")
+    table = markdown(survey(args.tasks or list(known), range(args.seeds), platform=args.platform))
     print(table, end="")
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
