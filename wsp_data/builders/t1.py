@@ -1,8 +1,8 @@
 """T1 Local action calibration (SPEC §3 T1).
 
 Proposal: a verified expert source trajectory; one non-gripper action dimension, one direction, one
-window of `WINDOW` steps, two distinct magnitudes from `MAGNITUDES` (native units: rad), the smaller one
-"small". The triplet shares the scene seed, dimension, direction and window.
+window of `WINDOW` steps, two distinct magnitudes from `MAGNITUDES` in native units (ManiSkill: rad of a
+joint target; LIBERO: OSC units, ×0.05 m or ×0.5 rad per step), the smaller one "small". The triplet shares the scene seed, dimension, direction and window.
 Validation: both variants replayed unrendered first (task success + common validity, SPEC §5); only then
 all three are rendered, and the triplet is kept when all three rendered references succeed and
 0 < D(x⁰, xˢ) < D(x⁰, xˡ), D being the temporally aligned full-video MSE on the simulator's own frames.
@@ -14,28 +14,29 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache
+from wsp_data.builders.rig import RigCache, TaskRig
 from wsp_data.schema import FPS
 from wsp_data.staging import RolloutArrays
 from wsp_eval.video import aligned_mse
 
 MAGNITUDES = (0.0025, 0.005, 0.010, 0.015, 0.020)
 WINDOW = 20  # steps (1 s at 20 Hz)
-PERTURBED_DIMS = 7  # the 7 arm joints; the gripper (dim 7) is never perturbed
 
 
 class T1Builder(SuiteBuilder):
     suite = "t1"
     title = "T1 Local action calibration"
-    description = ("Triplets (original, small, large): one non-gripper joint target perturbed in one direction over "
-                   "one 1 s window at two magnitudes from {0.0025, 0.005, 0.010, 0.015, 0.020} rad. All three "
+    description = ("Triplets (original, small, large): one non-gripper dimension of the native action perturbed in one "
+                   "direction over one 1 s window at two magnitudes from {0.0025, 0.005, 0.010, 0.015, 0.020} "
+                   "(native units: rad on ManiSkill, OSC units on LIBERO). All three "
                    "references succeed and 0 < D0s < D0l on the simulator's own frames; columns `d_os`, `d_ol` "
                    "and `r_star` hold the reference-side MSEs and ratio. Score: response-ratio calibration.")
     roles = ("original", "small", "large")
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.rig = RigCache()
+        self.rig = RigCache(lambda task: TaskRig(task, config.platform))
 
     def close(self) -> None:
         self.rig.close()
@@ -54,7 +55,7 @@ class T1Builder(SuiteBuilder):
             return Dropped("source_failed")
         if len(source) < WINDOW + 2:
             return Dropped("source_too_short")
-        dim = int(rng.integers(PERTURBED_DIMS))
+        dim = int(rng.integers(rig.kit.perturbed_dims))
         direction = int(rng.choice([-1, 1]))
         start = int(rng.integers(0, len(source) - WINDOW + 1))
         small, large = sorted(float(m) for m in rng.choice(MAGNITUDES, size=2, replace=False))

@@ -8,52 +8,49 @@ Validation: the whole stream is executed from the receiver's reset state without
 (`replay_problem`: the common checks of SPEC §5 plus two kinds of unintended collision), then rendered, and
 kept only if RMFA can score it: at least one window with active robot pixels (`wsp_eval.flow`).
 Stored per instance: donor task and seed, the receiver–donor motion mismatch (`motion_mismatch`) and the
-number of scorable windows. Definitions and measurements: docs/t2.md.
+number of scorable windows. Definitions and measurements: docs/t2.md; on LIBERO (OSC delta streams: every
+donor is compatible, arm motion = the commanded hand path, `platforms.osc_blocked`): docs/libero.md.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache
-from wsp_data.builders.validity import MAX_JOINT_SPEED, check_rollout
-from wsp_data.platforms.maniskill import ManiSkillPlatform, Rollout, _np
+from wsp_data.builders.rig import RigCache, rollout_problem
+from wsp_data.builders.validity import MAX_JOINT_SPEED
+from wsp_data.platforms import BLOCK_RAD, BLOCK_STEPS, PlatformKit, joint_blocked, kit
 from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
-from wsp_data.sources.experts import ExpertSource, task_spec
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
 
-ARM = 7  # arm joints; the gripper (action dim 7) is not arm motion
 TYPICAL_TRAJECTORIES = 8  # expert trajectories averaged into a task's typical arm stream
 TYPICAL_MAX_SEEDS = 24  # training seeds tried to find them
 MISMATCH_POINTS = 50  # time-normalised samples per stream
 DONOR_SEED_OFFSET = SEED_SPAN // 2  # donor seeds live in the upper half of the T2 seed range
 START_GAP = MAX_JOINT_SPEED / FPS  # rad: the largest first-step jump the instability check allows (0.5)
-BLOCK_RAD = 0.15  # rad an arm joint may lag its target …
-BLOCK_STEPS = 10  # … for this many consecutive steps (0.5 s) before the arm counts as blocked
 FLUNG_SPEED = 1.0  # m/s: horizontal speed of a task object that counts as flung
 
 
 # -- motion mismatch -------------------------------------------------------------------------------------
-def time_normalised(actions: np.ndarray, points: int = MISMATCH_POINTS) -> np.ndarray:
-    """The 7 arm-joint targets of a (T, 8) stream, linearly resampled at `points` evenly spaced instants of
-    normalised time [0, 1] (first and last action kept): (points, 7)."""
-    arm = np.asarray(actions, dtype=np.float64)[:, :ARM]
+def time_normalised(actions: np.ndarray, points: int = MISMATCH_POINTS, platform: str = "maniskill") -> np.ndarray:
+    """The arm motion of a native stream (ManiSkill: the 7 joint targets, rad; LIBERO: the hand's commanded
+    path, the cumulative OSC position deltas, m), linearly resampled at `points` evenly spaced instants of
+    normalised time [0, 1] (first and last action kept): (points, k)."""
+    arm = kit(platform).arm_motion(actions)
     if len(arm) < 2:
         raise ValueError("a stream needs at least two actions to be time-normalised")
     src, dst = np.linspace(0.0, 1.0, len(arm)), np.linspace(0.0, 1.0, points)
-    return np.stack([np.interp(dst, src, arm[:, j]) for j in range(ARM)], axis=1)
+    return np.stack([np.interp(dst, src, arm[:, j]) for j in range(arm.shape[1])], axis=1)
 
 
-def typical_arm_stream(source: ExpertSource, count: int = TYPICAL_TRAJECTORIES) -> np.ndarray:
-    """Mean of the time-normalised arm streams of a task's first `count` verified expert trajectories on
-    training seeds SEED_BASE["train"], +1, … (never test seeds): (MISMATCH_POINTS, 7)."""
+def typical_arm_stream(source, count: int = TYPICAL_TRAJECTORIES, platform: str = "maniskill") -> np.ndarray:
+    """Mean of the time-normalised arm motions of a task's first `count` verified expert trajectories on
+    training seeds SEED_BASE["train"], +1, … (never test seeds): (MISMATCH_POINTS, k)."""
     streams = []
     for seed in range(SEED_BASE["train"], SEED_BASE["train"] + TYPICAL_MAX_SEEDS):
         if (a := source.trajectory(seed)) is not None:
-            streams.append(time_normalised(a))
+            streams.append(time_normalised(a, platform=platform))
             if len(streams) == count:
                 return np.mean(streams, axis=0)
     raise RuntimeError(f"{source.spec.name}: only {len(streams)} of the {count} expert trajectories needed for "
@@ -61,17 +58,18 @@ def typical_arm_stream(source: ExpertSource, count: int = TYPICAL_TRAJECTORIES) 
                        f"{SEED_BASE['train'] + TYPICAL_MAX_SEEDS - 1}")
 
 
-def motion_mismatch(donor_actions: np.ndarray, typical: np.ndarray) -> float:
-    """RMS (rad) over time-normalised samples and the 7 arm joints of donor stream − receiver's typical."""
-    return float(np.sqrt(np.mean((time_normalised(donor_actions, len(typical)) - typical) ** 2)))
+def motion_mismatch(donor_actions: np.ndarray, typical: np.ndarray, platform: str = "maniskill") -> float:
+    """RMS over time-normalised samples and arm-motion dimensions of donor − receiver's typical (ManiSkill: rad
+    over the 7 joints; LIBERO: m over the hand path's x, y, z)."""
+    return float(np.sqrt(np.mean((time_normalised(donor_actions, len(typical), platform) - typical) ** 2)))
 
 
 # -- validity ----------------------------------------------------------------------------------------------
 def arm_blocked(qpos: np.ndarray, actions: np.ndarray) -> bool:
-    """The arm is held back by something it collides with (table, a fixed fixture, a pinned object): some arm
-    joint lags its target by more than BLOCK_RAD for BLOCK_STEPS consecutive steps. `qpos` (T+1, 9)."""
-    lag = np.abs(qpos[1:, :ARM] - actions[:, :ARM]).max(axis=1)
-    return len(lag) >= BLOCK_STEPS and bool((sliding_window_view(lag, BLOCK_STEPS).min(axis=1) > BLOCK_RAD).any())
+    """Joint-target streams: the arm is held back by something it collides with (table, a fixed fixture, a
+    pinned object): some arm joint lags its target by more than BLOCK_RAD (0.15 rad) for BLOCK_STEPS (10)
+    consecutive steps. `qpos` (T+1, 9). LIBERO's OSC streams use `platforms.osc_blocked`."""
+    return joint_blocked(qpos, None, actions)
 
 
 def object_flung(object_poses: np.ndarray) -> bool:
@@ -84,11 +82,18 @@ def object_flung(object_poses: np.ndarray) -> bool:
 
 def replay_problem(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarray, actions: np.ndarray,
                    qlimits: np.ndarray) -> str | None:
-    """None for a valid donor replay, else the drop reason: a common check (`check_rollout`), `arm_blocked`
-    or `object_flung` (unintended collisions)."""
+    """None for a valid ManiSkill donor replay, else the drop reason: a common check (`check_rollout`),
+    `arm_blocked` or `object_flung` (unintended collisions)."""
+    from wsp_data.builders.validity import check_rollout
+
     if (why := check_rollout(qpos, tcp_pose, object_poses, actions, qlimits)) is not None:
         return why
-    if arm_blocked(qpos, actions):
+    return collision_problem(kit("maniskill"), qpos, tcp_pose, object_poses, actions)
+
+
+def collision_problem(k: PlatformKit, qpos, tcp_pose, object_poses, actions) -> str | None:
+    """The two unintended collisions of a donor replay: the arm blocked, or a task object flung."""
+    if k.blocked(qpos, tcp_pose, actions):
         return "arm_blocked"
     if object_flung(object_poses):
         return "object_flung"
@@ -100,18 +105,19 @@ class _TaskRig:
     """One task in one worker: its expert source (donor streams, state-only replays), typical arm stream and
     a rendering env created when the task is first a receiver."""
 
-    def __init__(self, task: str):
-        self.spec = task_spec(task)
-        self.expert = ExpertSource(task)
+    def __init__(self, task: str, platform: str):
+        self.task, self.platform, self.kit = task, platform, kit(platform)
+        self.expert = self.kit.make_expert(task)
+        self.spec = self.expert.spec
         self.state = self.expert.replayer
-        self.qlimits = _np(self.state.robot.get_qlimits()[0])
-        self.typical = typical_arm_stream(self.expert)
-        self._render: ManiSkillPlatform | None = None
+        self.qlimits = self.state.qlimits
+        self.typical = typical_arm_stream(self.expert, platform=platform)
+        self._render = None
 
     @property
-    def render(self) -> ManiSkillPlatform:
+    def render(self):
         if self._render is None:
-            self._render = ManiSkillPlatform(self.spec.name, render=True, objects=self.spec.objects)
+            self._render = self.kit.make_renderer(self.task, self.spec.objects)
         return self._render
 
     def close(self) -> None:
@@ -119,9 +125,11 @@ class _TaskRig:
         if self._render is not None:
             self._render.close()
 
-    def invalid(self, ro: Rollout) -> str | None:
-        return replay_problem(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
-                              self.qlimits)
+    def invalid(self, ro) -> str | None:
+        if (why := rollout_problem(self.kit, self.qlimits, ro)) is not None:
+            return why
+        return collision_problem(self.kit, ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"),
+                                 ro.actions)
 
 
 class T2Builder(SuiteBuilder):
@@ -130,9 +138,11 @@ class T2Builder(SuiteBuilder):
     description = ("Cross-task replays: the complete expert action stream of a donor task, executed from the receiver "
                    "scene's initial state. Kept when the replay is executable and valid (joint limits, no instability, "
                    "the arm never blocked, no object flung) and has robot motion RMFA can score. Columns `donor_task`, "
-                   "`donor_seed`, `mismatch` (RMS rad between the donor's time-normalised arm stream and the receiver "
-                   "task's typical one; cut into deciles at scoring) and `active_windows`. Score: RMFA.")
+                   "`donor_seed`, `mismatch` (RMS between the donor's time-normalised arm motion and the receiver "
+                   "task's typical one: rad of joint targets on ManiSkill, m of commanded hand path on LIBERO; cut "
+                   "into deciles at scoring) and `active_windows`. Score: RMFA.")
     roles = ("reference",)
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
@@ -141,7 +151,7 @@ class T2Builder(SuiteBuilder):
         if MAX_ATTEMPTS * config.count > DONOR_SEED_OFFSET:
             raise ValueError(f"T2 supports at most {DONOR_SEED_OFFSET // MAX_ATTEMPTS} instances per config: receiver "
                              f"scene seeds must stay below the donor seeds (offset {DONOR_SEED_OFFSET})")
-        self.rig = RigCache(_TaskRig)
+        self.rig = RigCache(lambda task: _TaskRig(task, config.platform))
 
     def close(self) -> None:
         self.rig.close()
@@ -181,7 +191,7 @@ class T2Builder(SuiteBuilder):
         row = {
             "task": plan.task, "seed": seed, "instruction": receiver.spec.instruction,
             "objects": list(receiver.spec.objects), "source": f"scripted_expert (donor: {donor_task})",
-            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical),
+            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical, self.config.platform),
             "active_windows": int((active > 0).sum()), "num_windows": len(active),
             "interventions": {"reference": {"donor_task": donor_task, "donor_seed": donor_seed}},
         }

@@ -12,7 +12,9 @@
 Every proposal is validated unrendered first (common validity + the kind's rule over the whole rollout);
 only then is it rendered, checked again, and tracked with `wsp_eval.tracking`: the reference gate must reach
 `GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100.
-Thresholds and task choices are documented in docs/t4.md.
+Thresholds and task choices are documented in docs/t4.md. On LIBERO (`_LiberoTaskRig`) a BDDL scene cannot
+gain a body, so the distractor is one of the scene's own movable objects the task does not use, relocated to a
+free place in view; placements are measured against every movable object of the scene (docs/libero.md).
 """
 
 from __future__ import annotations
@@ -21,14 +23,11 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-import sapien
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache
-from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms.maniskill import GRIPPER_OPEN, ExtraActor, ManiSkillPlatform, Rollout, _np
+from wsp_data.builders.rig import RigCache, rollout_problem
+from wsp_data.platforms import kit
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
-from wsp_data.sources.experts import ExpertSource, task_spec
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
     GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, motion_gate, object_motion, project,
@@ -62,10 +61,14 @@ MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object 
 REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
 
 _YELLOW, _PURPLE, _CYAN = (0.95, 0.8, 0.1, 1.0), (0.55, 0.25, 0.75, 1.0), (0.1, 0.75, 0.8, 1.0)
-PALETTE = tuple(ExtraActor(f"distractor_{i}", shape, (h, h, h), color) for i, (shape, h, color) in enumerate((
+PALETTE_SPECS = (  # ManiSkill distractors: (shape, half size, colour)
     ("box", 0.02, _YELLOW), ("box", 0.025, _PURPLE), ("box", 0.02, _CYAN),
     ("sphere", 0.02, _PURPLE), ("sphere", 0.025, _CYAN), ("sphere", 0.02, _YELLOW),
-)))
+)
+# LIBERO scenes are compiled from BDDL, so a body cannot be added without changing the model: its distractor
+# is one of the scene's own movable objects that the task does not involve, relocated (docs/libero.md).
+LIBERO_SUPPORT_TOL = 0.01  # m: a LIBERO distractor candidate rests on the same surface as the task's target
+LIBERO_AROUND = 0.25  # m: LIBERO placements are drawn this far around the task objects' xy box
 
 
 @dataclass
@@ -84,6 +87,8 @@ class Proposal:
 
 
 def _rotation(q: np.ndarray) -> np.ndarray:
+    import sapien  # ManiSkill's pose convention (float32), as its placements were always computed
+
     return sapien.Pose(q=np.asarray(q, np.float64)).to_transformation_matrix()[:3, :3]
 
 
@@ -111,15 +116,35 @@ def static(poses: np.ndarray) -> bool:
     return bool(dp.max() < POS_TOL and dq.max() < ROT_TOL)
 
 
+def false_contact(rig, base, source: np.ndarray, sight: _Sight) -> Proposal | str:
+    """The expert's stream with the gripper command clamped fully open throughout (the platform's own
+    gripper dimension and open value)."""
+    dim, opened = rig.kit.gripper_dim, rig.kit.gripper_open
+    if not (source[:, dim] != opened).any():
+        return "source_never_closes"
+    if not sight(base.observations[0].object_poses[0, :3]):
+        return "object_out_of_sight"
+    actions = source.copy()
+    actions[:, dim] = opened
+    return Proposal(actions, rig.spec.objects, rig.spec.target, {}, {"kind": "false_contact", "gripper": opened})
+
+
 class _TaskRig:
-    """One task's simulators in one worker: expert source, unrendered and rendered replays (with the palette)."""
+    """One ManiSkill task's simulators in one worker: expert source, unrendered and rendered replays (with the
+    palette), and the three kinds' proposals."""
 
     def __init__(self, task: str):
-        self.spec = task_spec(task)
+        from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform
+        from wsp_data.sources.experts import ExpertSource
+
+        self.palette = tuple(ExtraActor(f"distractor_{i}", shape, (h, h, h), color)
+                             for i, (shape, h, color) in enumerate(PALETTE_SPECS))
+        self.kit = kit("maniskill")
         self.expert = ExpertSource(task)
-        self.state = ManiSkillPlatform(task, render=False, objects=self.spec.objects, extras=PALETTE)
-        self.render = ManiSkillPlatform(task, render=True, objects=self.spec.objects, extras=PALETTE)
-        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+        self.spec = self.expert.spec
+        self.state = ManiSkillPlatform(task, render=False, objects=self.spec.objects, extras=self.palette)
+        self.render = ManiSkillPlatform(task, render=True, objects=self.spec.objects, extras=self.palette)
+        self.qlimits = self.state.qlimits
         self.intrinsic, self.extrinsic = self.state.camera_params()
         self._pin = self.state.robot._objs[0].create_pinocchio_model()
 
@@ -128,9 +153,15 @@ class _TaskRig:
         self.state.close()
         self.render.close()
 
-    def replay(self, platform: ManiSkillPlatform, seed: int, p: Proposal) -> Rollout:
+    def replay(self, platform, seed: int, p: Proposal):
         platform.object_names = p.objects
         return platform.replay(seed, p.actions, p.placements)
+
+    def invalid(self, ro) -> str | None:
+        return rollout_problem(self.kit, self.qlimits, ro)
+
+    def gripper_closed(self, qpos: np.ndarray) -> bool:
+        return bool((qpos[:, 7:9] < FINGER_OPEN).any())
 
     def footprint(self, qpos: np.ndarray) -> np.ndarray:
         """xy of every robot link origin below REACH_Z over a rollout (forward kinematics of its qpos): the
@@ -151,6 +182,149 @@ class _TaskRig:
     def sight(self, seed: int) -> _Sight:
         """What the camera sees at frame 0 of `seed` (one rendered reset: the robot's rest silhouette)."""
         return _Sight(self.intrinsic, self.extrinsic, self.render.reset(seed).mask)
+
+    # -- proposals ------------------------------------------------------------------------------
+    def distractor(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        objects = self.spec.objects
+        if len(objects) >= MAX_OBJECTS:
+            return "too_many_objects"
+        extra = self.palette[int(rng.integers(len(self.palette)))]
+        boxes = [_box_xy(self.local_vertices(n), base.observations[0].object_poses[i]) for i, n in enumerate(objects)]
+        footprint = self.footprint(base.stack("qpos"))
+        h = extra.half_size[0]
+        r = float(np.hypot(h, h)) if extra.shape == "box" else h
+        self.state.object_names = objects
+        for donor in rng.integers(SEED_BASE["t4"], SEED_BASE["t4"] + SEED_SPAN, size=DONOR_TRIES):
+            donor_pose = self.state.reset(int(donor)).object_poses[0].astype(np.float64)
+            yaw = np.arctan2(*_rotation(donor_pose[3:])[[1, 0], 0])
+            pose = np.array([*donor_pose[:2], h, np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+            box = np.stack([pose[:2] - r, pose[:2] + r])
+            if (sight(pose[:3]) and _gap(box, footprint).min(initial=np.inf) >= DISTRACTOR_MARGIN
+                    and all(_box_gap(box, b) >= CLEARANCE for b in boxes)):
+                params = {"kind": "distractor", "donor_seed": int(donor), "shape": extra.shape,
+                          "half_size": h, "color": list(extra.color), "pose": pose.tolist()}
+                return Proposal(source, objects + (extra.name,), extra.name, {extra.name: pose}, params)
+        return "no_clear_donor_placement"
+
+    def false_contact(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        return false_contact(self, base, source, sight)
+
+    def spatial_proximity(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        objects, target = self.spec.objects, self.spec.target
+        poses = base.observations[0].object_poses.astype(np.float64)
+        box = _box_xy(self.local_vertices(target), poses[0])
+        others = [_box_xy(self.local_vertices(n), poses[i]) for i, n in enumerate(objects) if i > 0]
+        footprint = self.footprint(base.stack("qpos"))
+        lo, hi = np.array(WORKSPACE).T
+        for xy in rng.uniform(lo, hi, size=(PLACEMENT_TRIES, 2)):
+            moved = box + (xy - poses[0, :2])
+            pose = poses[0].copy()
+            pose[:2] = xy
+            if (sight(pose[:3]) and _gap(moved, footprint).min(initial=np.inf) >= SWEPT_MARGIN
+                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
+                params = {"kind": "spatial_proximity", "from": poses[0].tolist(), "to": pose.tolist()}
+                return Proposal(source, objects, target, {target: pose}, params)
+        return "no_clear_placement"
+
+
+class _LiberoTaskRig:
+    """One LIBERO task's simulators in one worker, and the three kinds' proposals. The swept region, object
+    boxes and placements are measured on the scene itself (every scene object, not only the task's, must stay
+    clear); heights are taken relative to the surface the target rests on."""
+
+    def __init__(self, task: str):
+        self.kit = kit("libero")
+        self.expert = self.kit.make_expert(task)
+        self.spec = self.expert.spec
+        self.state = self.expert.replayer
+        self.render = self.kit.make_renderer(task, self.spec.objects)
+        self.qlimits = self.state.qlimits
+        self.intrinsic, self.extrinsic = self.state.camera_params()
+
+    def close(self) -> None:
+        self.expert.close()
+        self.render.close()
+
+    def replay(self, platform, seed: int, p: Proposal):
+        platform.track(p.objects)
+        try:
+            return platform.replay(seed, p.actions, p.placements)
+        finally:
+            platform.track(self.spec.objects)
+
+    def invalid(self, ro) -> str | None:
+        return rollout_problem(self.kit, self.qlimits, ro)
+
+    def gripper_closed(self, qpos: np.ndarray) -> bool:
+        return bool((np.abs(qpos[:, 7:9]) < FINGER_OPEN).any())
+
+    def sight(self, seed: int) -> _Sight:
+        return _Sight(self.intrinsic, self.extrinsic, self.render.reset(seed).mask)
+
+    def _scene(self, seed: int) -> tuple[dict[str, np.ndarray], float]:
+        """xy boxes of every movable object at frame 0 of `seed`, and the height of the target's support."""
+        self.state.reset(seed)
+        boxes = {}
+        for name in self.state.movable_objects():
+            pts = self.state.collision_points(name)
+            boxes[name] = np.stack([pts[:, :2].min(0), pts[:, :2].max(0)])
+        support = float(self.state.collision_points(self.spec.target)[:, 2].min())
+        return boxes, support
+
+    def _footprint(self, qpos: np.ndarray, support: float) -> np.ndarray:
+        pts = self.state.link_positions(qpos)
+        return pts[pts[:, 2] < support + REACH_Z, :2]
+
+    def _place(self, name: str, boxes: dict, footprint: np.ndarray, margin: float, sight: _Sight,
+               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray] | None:
+        """A frame-0 pose for `name`, moved in xy only (same height and orientation): in view, `margin` clear of
+        the swept region and CLEARANCE clear of every other movable object; with the pose it came from."""
+        pose = self.state.object_pose(name)
+        box = boxes[name]
+        task = np.concatenate([boxes[n] for n in self.spec.objects if n in boxes])
+        lo, hi = task.min(0) - LIBERO_AROUND, task.max(0) + LIBERO_AROUND
+        others = [b for n, b in boxes.items() if n != name]
+        for xy in rng.uniform(lo, hi, size=(PLACEMENT_TRIES, 2)):
+            moved = box + (xy - pose[:2])
+            to = pose.copy()
+            to[:2] = xy
+            if (sight(to[:3]) and _gap(moved, footprint).min(initial=np.inf) >= margin
+                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
+                return pose, to
+        return None
+
+    # -- proposals ------------------------------------------------------------------------------
+    def distractor(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        objects = self.spec.objects
+        if len(objects) >= MAX_OBJECTS:
+            return "too_many_objects"
+        boxes, support = self._scene(base.seed)
+        candidates = [n for n in self.state.movable_objects() if n not in objects
+                      and abs(self.state.collision_points(n)[:, 2].min() - support) <= LIBERO_SUPPORT_TOL]
+        if not candidates:
+            return "no_distractor_object"
+        footprint = self._footprint(base.stack("qpos"), support)
+        for i in rng.permutation(len(candidates)):
+            name = candidates[i]
+            self.state.reset(base.seed)
+            placed = self._place(name, boxes, footprint, DISTRACTOR_MARGIN, sight, rng)
+            if placed is not None:
+                params = {"kind": "distractor", "object": name, "from": placed[0].tolist(), "pose": placed[1].tolist()}
+                return Proposal(source, objects + (name,), name, {name: placed[1]}, params)
+        return "no_clear_distractor_placement"
+
+    def false_contact(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        return false_contact(self, base, source, sight)
+
+    def spatial_proximity(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
+        boxes, support = self._scene(base.seed)
+        footprint = self._footprint(base.stack("qpos"), support)
+        self.state.reset(base.seed)
+        placed = self._place(self.spec.target, boxes, footprint, SWEPT_MARGIN, sight, rng)
+        if placed is None:
+            return "no_clear_placement"
+        params = {"kind": "spatial_proximity", "from": placed[0].tolist(), "to": placed[1].tolist()}
+        return Proposal(source, self.spec.objects, self.spec.target, {self.spec.target: placed[1]}, params)
 
 
 class _Sight:
@@ -175,22 +349,27 @@ class T4Builder(SuiteBuilder):
     suite = "t4"
     title = "T4 Interaction grounding"
     description = ("Validated no-contact rollouts, balanced over three kinds (`kind`): a distractor inserted where "
-                   "the target lay in a same-task donor episode (task still succeeds), false contact (expert arm "
+                   "the target lay in a same-task donor episode (LIBERO: a scene object the task does not use, "
+                   "relocated; task still succeeds), false contact (expert arm "
                    "path, gripper clamped open), spatial proximity (target moved outside the robot's swept region). "
                    "The evaluated object never moves: `evaluated_object` (index `evaluated_object_index` in "
                    "`objects`), its frame-0 pixel `object_pixel_256` in the 256x256 scoring frame, and the "
                    "reference motion gate `gate_reference` (px). Score: tracked object displacement <= 10 px "
                    "behind a distal-arm motion gate.")
     roles = ("reference",)
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.kind_tasks = {k: tuple(t for t in config.tasks if t in KIND_TASKS[k]) for k in KINDS}
+        if config.platform == "libero":  # every LIBERO task grasps its target and has scene objects to spare
+            self.kind_tasks = {k: tuple(dict.fromkeys(config.tasks)) for k in KINDS}
+        else:
+            self.kind_tasks = {k: tuple(t for t in config.tasks if t in KIND_TASKS[k]) for k in KINDS}
         missing = [k for k, ts in self.kind_tasks.items() if not ts]
         if missing:
             raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; tasks per kind: "
                              + "; ".join(f"{k}: {', '.join(KIND_TASKS[k])}" for k in missing))
-        self.rig = RigCache(_TaskRig)
+        self.rig = RigCache(_LiberoTaskRig if config.platform == "libero" else _TaskRig)
 
     def plan(self, slot: int) -> SlotPlan:
         kind = KINDS[slot % len(KINDS)]
@@ -200,65 +379,11 @@ class T4Builder(SuiteBuilder):
     def close(self) -> None:
         self.rig.close()
 
-    # -- proposals ------------------------------------------------------------------------------
-    def _distractor(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
-                    rng: np.random.Generator) -> Proposal | str:
-        objects = rig.spec.objects
-        if len(objects) >= MAX_OBJECTS:
-            return "too_many_objects"
-        extra = PALETTE[int(rng.integers(len(PALETTE)))]
-        boxes = [_box_xy(rig.local_vertices(n), base.observations[0].object_poses[i]) for i, n in enumerate(objects)]
-        footprint = rig.footprint(base.stack("qpos"))
-        h = extra.half_size[0]
-        r = float(np.hypot(h, h)) if extra.shape == "box" else h
-        rig.state.object_names = objects
-        for donor in rng.integers(SEED_BASE["t4"], SEED_BASE["t4"] + SEED_SPAN, size=DONOR_TRIES):
-            donor_pose = rig.state.reset(int(donor)).object_poses[0].astype(np.float64)
-            yaw = np.arctan2(*_rotation(donor_pose[3:])[[1, 0], 0])
-            pose = np.array([*donor_pose[:2], h, np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
-            box = np.stack([pose[:2] - r, pose[:2] + r])
-            if (sight(pose[:3]) and _gap(box, footprint).min(initial=np.inf) >= DISTRACTOR_MARGIN
-                    and all(_box_gap(box, b) >= CLEARANCE for b in boxes)):
-                params = {"kind": "distractor", "donor_seed": int(donor), "shape": extra.shape,
-                          "half_size": h, "color": list(extra.color), "pose": pose.tolist()}
-                return Proposal(source, objects + (extra.name,), extra.name, {extra.name: pose}, params)
-        return "no_clear_donor_placement"
-
-    def _false_contact(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
-                       rng: np.random.Generator) -> Proposal | str:
-        if not (source[:, 7] < GRIPPER_OPEN).any():
-            return "source_never_closes"
-        if not sight(base.observations[0].object_poses[0, :3]):
-            return "object_out_of_sight"
-        actions = source.copy()
-        actions[:, 7] = GRIPPER_OPEN
-        return Proposal(actions, rig.spec.objects, rig.spec.target, {}, {"kind": "false_contact",
-                                                                          "gripper": GRIPPER_OPEN})
-
-    def _spatial_proximity(self, rig: _TaskRig, base: Rollout, source: np.ndarray, sight: _Sight,
-                           rng: np.random.Generator) -> Proposal | str:
-        objects, target = rig.spec.objects, rig.spec.target
-        poses = base.observations[0].object_poses.astype(np.float64)
-        box = _box_xy(rig.local_vertices(target), poses[0])
-        others = [_box_xy(rig.local_vertices(n), poses[i]) for i, n in enumerate(objects) if i > 0]
-        footprint = rig.footprint(base.stack("qpos"))
-        lo, hi = np.array(WORKSPACE).T
-        for xy in rng.uniform(lo, hi, size=(PLACEMENT_TRIES, 2)):
-            shift = xy - poses[0, :2]
-            moved = box + shift
-            pose = poses[0].copy()
-            pose[:2] = xy
-            if (sight(pose[:3]) and _gap(moved, footprint).min(initial=np.inf) >= SWEPT_MARGIN
-                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
-                params = {"kind": "spatial_proximity", "from": poses[0].tolist(), "to": pose.tolist()}
-                return Proposal(source, objects, target, {target: pose}, params)
-        return "no_clear_placement"
-
     # -- validation -----------------------------------------------------------------------------
-    def violation(self, rig: _TaskRig, kind: str, p: Proposal, ro: Rollout) -> str | None:
+    def violation(self, rig, kind: str, p: Proposal, ro) -> str | None:
         """The first failed check of a rollout: common validity (SPEC §5), then the kind's rule."""
         poses, contacts = ro.stack("object_poses"), ro.stack("contacts")
-        if (why := check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), poses, ro.actions, rig.qlimits)):
+        if (why := rig.invalid(ro)):
             return why
         k = p.index
         if contacts[:, k].any():
@@ -269,7 +394,7 @@ class T4Builder(SuiteBuilder):
             return None if ro.success else "task_failed"
         if contacts.any():
             return "other_object_contacted"
-        if kind == "false_contact" and (ro.stack("qpos")[:, 7:9] < FINGER_OPEN).any():
+        if kind == "false_contact" and rig.gripper_closed(ro.stack("qpos")):
             return "gripper_closed"
         return None
 
@@ -281,7 +406,7 @@ class T4Builder(SuiteBuilder):
         original = Proposal(source, rig.spec.objects, rig.spec.target, {}, {})
         base = rig.replay(rig.state, seed, original)  # the original rollout: swept region and object geometry
         simulated = len(source)
-        proposal = getattr(self, f"_{kind}")(rig, base, source, rig.sight(seed), rng)
+        proposal = getattr(rig, kind)(base, source, rig.sight(seed), rng)
         if isinstance(proposal, str):
             return Dropped(proposal, simulated_steps=simulated)
         ro = rig.replay(rig.state, seed, proposal)

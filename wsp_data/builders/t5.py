@@ -10,6 +10,9 @@ Validation, unrendered first: common validity (SPEC §5), no other object shifte
 primitive's acceptance rule (`t5_rules`) on the evaluated object's simulator states; only then rendered, and
 re-checked on the rendered rollout. Slots are balanced exactly by primitive: slot k gets `PRIMITIVES[k % 8]`
 and the next of that primitive's compatible tasks (`PRIMITIVE_TASKS`) in turn.
+LIBERO uses push, pull, tap and drop (`t5_rules.PLATFORM_PRIMITIVES`), no props: the branch replays the
+expert's OSC stream up to the branch step and `libero_primitives` continues closed-loop; push and tap serve
+tasks with a low target (`libero_primitives.compatible`).
 """
 
 from __future__ import annotations
@@ -17,13 +20,10 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache
-from wsp_data.builders.t5_rules import MOTION_ONSET, PRIMITIVES, check
-from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform, Rollout, _np
+from wsp_data.builders.rig import RigCache, TaskRig, rollout_problem
+from wsp_data.builders.t5_rules import MOTION_ONSET, PLATFORM_PRIMITIVES, check
+from wsp_data.platforms import kit
 from wsp_data.schema import IMAGE_SIZE, SOURCE_ROLE
-from wsp_data.sources.experts import task_spec
-from wsp_data.sources.primitives import PROPS, SCRIPTS, BranchScript, prop_placement
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import project
 
@@ -46,25 +46,44 @@ SOURCE_PROP_MAX_SHIFT = 0.001  # m: a prop must rest untouched through the sourc
 
 
 class _Rig:
-    """One task's simulators in one worker (with a prop, if any): branching script, unrendered and rendered
-    `pd_joint_pos` replays, all built with the same scene extras."""
+    """One ManiSkill task's simulators in one worker (with a prop, if any): branching script, unrendered and
+    rendered `pd_joint_pos` replays, all built with the same scene extras."""
 
-    def __init__(self, task: str, prop: ExtraActor | None):
+    def __init__(self, task: str, prop):
+        from wsp_data.platforms.maniskill import ManiSkillPlatform
+        from wsp_data.sources.experts import task_spec
+        from wsp_data.sources.primitives import BranchScript
+
+        self.kit = kit("maniskill")
         self.spec = task_spec(task)
         extras = (prop,) if prop else ()
         self.objects = self.spec.objects + tuple(e.name for e in extras)
         self.script = BranchScript(task, self.objects, extras)
         self.state = ManiSkillPlatform(task, render=False, objects=self.objects, extras=extras)
         self.render = ManiSkillPlatform(task, render=True, objects=self.objects, extras=extras)
-        self.qlimits = _np(self.state.robot.get_qlimits()[0])
+        self.qlimits = self.state.qlimits
 
     def close(self) -> None:
         for p in (self.script, self.state, self.render):
             p.close()
 
-    def invalid(self, ro: Rollout) -> str | None:
-        return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), ro.actions,
-                             self.qlimits)
+    def invalid(self, ro) -> str | None:
+        return rollout_problem(self.kit, self.qlimits, ro)
+
+    def base_xy(self) -> list[float]:
+        return self.state.robot.pose.p[0, :2].cpu().numpy().astype(float).tolist()
+
+
+class _LiberoRig(TaskRig):
+    """One LIBERO task's simulators in one worker: the expert source (its unrendered env branches and
+    validates) and a rendering env."""
+
+    def __init__(self, task: str):
+        super().__init__(task, "libero")
+        self.objects = self.spec.objects
+
+    def base_xy(self) -> list[float]:
+        return self.state.base_xy().astype(float).tolist()
 
 
 def first_contact(poses: np.ndarray, contacts: np.ndarray) -> int | None:
@@ -88,27 +107,45 @@ class T5Builder(SuiteBuilder):
                    "(`primitive`, `evaluated_object` and the measured quantities are columns). Score: primitive "
                    "judge on 12 frames.")
     roles = ("reference",)
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        missing = [p for p in PRIMITIVES if not self.compatible(p)]
-        if missing:
-            raise ValueError("T5 needs, for every primitive, one of its tasks among the selected ones; none for "
-                             + "; ".join(f"{p} (needs one of {', '.join(PRIMITIVE_TASKS[p])})" for p in missing))
-        self.rig = RigCache(_Rig)
+        self.primitives = PLATFORM_PRIMITIVES[config.platform]
+        if config.platform == "libero":
+            from wsp_data.sources.libero_experts import task_spec
+            from wsp_data.sources.libero_primitives import compatible
 
-    def compatible(self, primitive: str) -> list[str]:
-        return [t for t in PRIMITIVE_TASKS[primitive] if t in self.config.tasks]
+            self.primitive_tasks = {p: tuple(t for t in config.tasks if compatible(p, task_spec(t)))
+                                    for p in self.primitives}
+            self.rig = RigCache(lambda task, prop: _LiberoRig(task))
+            needs = "a task whose target is a bowl or a flat box (push, tap) among the selected ones"
+        else:
+            self.primitive_tasks = {p: tuple(t for t in PRIMITIVE_TASKS[p] if t in config.tasks)
+                                    for p in self.primitives}
+            self.rig = RigCache(_Rig)
+            needs = "one of its tasks among the selected ones; tasks per primitive: " + "; ".join(
+                f"{p}: {', '.join(PRIMITIVE_TASKS[p])}" for p in self.primitives)
+        missing = [p for p in self.primitives if not self.primitive_tasks[p]]
+        if missing:
+            raise ValueError(f"T5 needs, for every primitive, {needs}; none for {', '.join(missing)}")
+
+    def compatible(self, primitive: str) -> tuple[str, ...]:
+        return self.primitive_tasks[primitive]
 
     def plan(self, slot: int) -> SlotPlan:
-        primitive = PRIMITIVES[slot % len(PRIMITIVES)]
+        primitive = self.primitives[slot % len(self.primitives)]
         tasks = self.compatible(primitive)
-        return SlotPlan(tasks[(slot // len(PRIMITIVES)) % len(tasks)], primitive)
+        return SlotPlan(tasks[(slot // len(self.primitives)) % len(tasks)], primitive)
 
     def close(self) -> None:
         self.rig.close()
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
+        if self.config.platform == "libero":
+            return self._attempt_libero(plan, seed)
+        from wsp_data.sources.primitives import PROPS, SCRIPTS, prop_placement
+
         primitive, prop = plan.group, PROPS.get(plan.group)
         rig = self.rig(plan.task, prop)
         script, spec = rig.script, rig.spec
@@ -146,8 +183,35 @@ class T5Builder(SuiteBuilder):
             return Dropped("branch_mismatch", simulated_steps=simulated + branch)
         SCRIPTS[primitive](script, target, others)
         stream = script.trajectory()
+        simulated += len(stream)
+        return self._validate(plan, rig, seed, source, stream, placements, branch, contact, evaluated, simulated)
+
+    def _attempt_libero(self, plan: SlotPlan, seed: int) -> Kept | Dropped:
+        from wsp_data.sources.libero_primitives import branch_stream
+
+        rig, primitive = self.rig(plan.task, None), plan.group
+        source = rig.expert.trajectory(seed)  # scripted and verified in this scene
+        if source is None:
+            return Dropped("source_failed")
+        src = rig.state.replay(seed, source)
+        simulated = 2 * len(source)
+        contact = first_contact(src.stack("object_poses")[:, 0], src.stack("contacts")[:, 0])
+        if contact is None:
+            return Dropped("source_without_contact", simulated_steps=simulated)
+        branch = max(1, contact - BACKOFF)
+        stream = branch_stream(rig.state, rig.spec, seed, source, branch, primitive)
+        if stream is None:
+            return Dropped("primitive_out_of_time", simulated_steps=simulated)
+        simulated += len(stream)
+        return self._validate(plan, rig, seed, source, stream, None, branch, contact, rig.spec.target, simulated)
+
+    def _validate(self, plan: SlotPlan, rig, seed: int, source: np.ndarray, stream: np.ndarray, placements,
+                  branch: int, contact: int, evaluated: str, simulated: int) -> Kept | Dropped:
+        """Replay the branched stream unrendered, check it, render it, check again, and make the instance."""
+        primitive, spec = plan.group, rig.spec
+        ev = rig.objects.index(evaluated)
         ro = rig.state.replay(seed, stream, placements)
-        simulated += 2 * len(stream)
+        simulated += len(stream)
         if (why := self.reject(rig, ro, primitive, ev)) is not None:
             return Dropped(why, simulated_steps=simulated)
         rendered = rig.render.replay(seed, stream, placements)
@@ -155,8 +219,8 @@ class T5Builder(SuiteBuilder):
         if (why := self.reject(rig, rendered, primitive, ev)) is not None:
             return Dropped(f"rendered_{why}", steps, simulated)
         poses = rendered.stack("object_poses")
-        base_xy = _np(rig.state.robot.pose.p[0, :2]).astype(float).tolist()
-        _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy)
+        base_xy = rig.base_xy()
+        _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy, self.config.platform)
         parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": branch,
                       "placements": {k: v.astype(float).tolist() for k, v in (placements or {}).items()}}
         row = {
@@ -172,13 +236,12 @@ class T5Builder(SuiteBuilder):
         return Kept(row, [RolloutArrays.from_rollout("reference", rendered),
                           RolloutArrays.from_rollout(SOURCE_ROLE, src)], steps + len(source), simulated)
 
-    @staticmethod
-    def reject(rig: _Rig, ro: Rollout, primitive: str, ev: int) -> str | None:
+    def reject(self, rig, ro, primitive: str, ev: int) -> str | None:
         """Why a rollout is not a valid reference of `primitive` on object column `ev`, or None."""
         if (why := rig.invalid(ro)) is not None:
             return why
         poses = ro.stack("object_poses")
         if any(max_shift(poses[:, i]) > OTHER_OBJECT_MAX_SHIFT for i in range(len(rig.objects)) if i != ev):
             return "disturbed_other_object"
-        ok, _ = check(primitive, poses[:, ev], ro.stack("contacts")[:, ev], _np(rig.state.robot.pose.p[0, :2]))
+        ok, _ = check(primitive, poses[:, ev], ro.stack("contacts")[:, ev], rig.base_xy(), self.config.platform)
         return None if ok else "primitive_not_observed"

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache
+from wsp_data.builders.rig import RigCache, TaskRig
 from wsp_data.staging import RolloutArrays
 
 EPISODES_PER_TASK = 100  # default size: 100 expert episodes per task
@@ -22,10 +22,11 @@ class TrainBuilder(SuiteBuilder):
     description = ("Scripted-expert rollouts of the benchmark tasks on training-range scene seeds (disjoint from "
                    "every test suite), one episode per row, for training world models with LeRobot's dataloader.")
     roles = ("expert",)
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.rig = RigCache()
+        self.rig = RigCache(lambda task: TaskRig(task, config.platform))
 
     def close(self) -> None:
         self.rig.close()
