@@ -33,9 +33,10 @@ sys.path.insert(0, str(ROOT))
 from wsp_data.platforms.maniskill import Observation  # noqa: E402  (sets the rendering env vars first)
 from wsp_data.sources.experts import ExpertSource  # noqa: E402
 from wsp_data.sources.policies import (  # noqa: E402
-    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, TRAINING_CONFIG, MLPPolicy, PolicySource,
+    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, TRAINING_CONFIG, PolicySource,
     action_target, feature_names, features, read_goal, save_checkpoint, sha256,
 )
+from wsp_data.sources.policies import fit as train  # noqa: E402
 
 # Held-out evaluation seeds: training range (< 1,000,000), disjoint from demonstration seeds and from the seeds
 # 900,000–900,009 on which the recipe (noise injection, step counts) was chosen.
@@ -139,40 +140,6 @@ def dataset(task: str, d: dict) -> tuple[np.ndarray, np.ndarray, float]:
         X.append(features(task, ob, int(d["step"][i]), d["goal"][i], ref))
         Y.append(action_target(ob, d["action"][i]))
     return np.stack(X), np.stack(Y), ref
-
-
-def train(X: np.ndarray, Y: np.ndarray, cfg: dict, log) -> tuple[MLPPolicy, MLPPolicy, list[float]]:
-    """Adam + cosine decay on MSE of normalised targets; returns (early, late) models and a loss log."""
-    torch.manual_seed(cfg["seed"])
-    gen = torch.Generator().manual_seed(cfg["seed"])
-    x, y = torch.from_numpy(X), torch.from_numpy(Y)
-    model = MLPPolicy(X.shape[1], tuple(cfg["hidden"]))
-    model.x_mean.copy_(x.mean(0))
-    model.x_std.copy_(x.std(0).clamp_min(cfg["std_floor"]))
-    model.y_mean.copy_(y.mean(0))
-    model.y_std.copy_(y.std(0).clamp_min(cfg["std_floor"]))
-    yn = (y - model.y_mean) / model.y_std
-    opt = torch.optim.AdamW(model.net.parameters(), lr=cfg["lr"], weight_decay=cfg["weight_decay"])
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: 0.5 * (1 + np.cos(np.pi * min(s, cfg["steps"]) / cfg["steps"])))
-    early, losses, running = None, [], 0.0
-    for step in range(1, cfg["steps"] + 1):
-        idx = torch.randint(len(x), (cfg["batch"],), generator=gen)
-        pred = model.net((x[idx] - model.x_mean) / model.x_std)
-        loss = torch.nn.functional.mse_loss(pred, yn[idx])
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        running += loss.item()
-        if step % 500 == 0:
-            losses.append(round(running / 500, 6))
-            running = 0.0
-            log(f"  step {step}: loss {losses[-1]:.4f}")
-        if step == cfg["early_steps"]:
-            early = MLPPolicy(X.shape[1], tuple(cfg["hidden"]))
-            early.load_state_dict(model.state_dict())
-    return early, model, losses
 
 
 def jerk(actions: np.ndarray) -> float:

@@ -1,4 +1,4 @@
-"""T3 Action-source behaviour preservation (SPEC §3 T3) on ManiSkill.
+"""T3 Action-source behaviour preservation (SPEC §3 T3) on ManiSkill and LIBERO.
 
 Slots come in groups of eight that share task, episode and scene seed, one per source: the scripted expert,
 five scripted operator models H1–H5 (`wsp_data/sources/operators.py`), and an early and a late behaviour-
@@ -13,6 +13,7 @@ worker), so all eight land on the same seed; slot k's attempt a uses candidate a
 stream. Columns: `source_group`, `source_kind` (scripted_expert / scripted_operator / bc_policy / human_teleop),
 `source_provenance` (JSON: operator parameters, or checkpoint, training steps and measured success),
 `group_id` (task and seed), `source_success`, `steps`.
+On LIBERO the operators and policies are `wsp_data/sources/libero_t3.py` (same groups, same interfaces).
 """
 
 from __future__ import annotations
@@ -27,7 +28,16 @@ from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, scene_seed
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
 
-T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
+T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")  # ManiSkill's
+
+
+def t3_tasks(platform: str) -> tuple[str, ...]:
+    """The tasks with operator models and trained policies on `platform`."""
+    if platform == "libero":
+        from wsp_data.sources.libero_t3 import T3_TASKS as LIBERO_T3_TASKS
+
+        return LIBERO_T3_TASKS
+    return T3_TASKS
 OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # `wsp_data.sources.operators.OPERATORS` (tested)
 POLICY_GROUPS = ("policy_early", "policy_late")  # `wsp_data.sources.policies.STAGES` (tested)
 SOURCE_GROUPS = ("expert", *OPERATOR_GROUPS, *POLICY_GROUPS)
@@ -37,26 +47,34 @@ GROUP_SIZE = len(SOURCE_GROUPS)
 class _Rig(TaskRig):
     """One task's expert, operators and policies, with unrendered and rendered replays."""
 
-    def __init__(self, task: str):
-        super().__init__(task)
+    def __init__(self, task: str, platform: str = "maniskill"):
+        super().__init__(task, platform)
+        self.task, self.platform = task, platform
         self._sources: dict[str, object] = {}
 
     def source(self, group: str):
         if group not in self._sources:
-            if group in OPERATOR_GROUPS:
+            stage = group.removeprefix("policy_")
+            if self.platform == "libero":
+                from wsp_data.sources.libero_t3 import LiberoOperatorSource, LiberoPolicySource
+
+                self._sources[group] = (LiberoOperatorSource(self.task, group) if group in OPERATOR_GROUPS
+                                        else LiberoPolicySource(self.task, stage))
+            elif group in OPERATOR_GROUPS:
                 from wsp_data.sources.operators import OperatorSource
 
-                self._sources[group] = OperatorSource(self.spec.name, group)
+                self._sources[group] = OperatorSource(self.task, group)
             else:
                 from wsp_data.sources.policies import PolicySource
 
-                self._sources[group] = PolicySource(self.spec.name, group.removeprefix("policy_"))
+                self._sources[group] = PolicySource(self.task, stage)
         return self._sources[group]
 
     def stream(self, group: str, seed: int) -> tuple[np.ndarray | None, dict]:
         """The group's action stream on `seed` and its provenance (stream None: the source produced none)."""
         if group == "expert":
-            return self.expert.trajectory(seed), {"kind": "scripted_expert", "script": f"experts.{self.spec.name}"}
+            script = "libero_experts.PickPlaceScript" if self.platform == "libero" else f"experts.{self.task}"
+            return self.expert.trajectory(seed), {"kind": "scripted_expert", "script": script}
         src = self.source(group)
         if group in OPERATOR_GROUPS:
             actions = src.attempt(seed).actions  # failures are kept: the caller replays and records success
@@ -83,13 +101,15 @@ class T3Builder(SuiteBuilder):
                    "successes and failures kept. Columns `source_group`, `source_kind`, `source_provenance`, "
                    "`group_id`. Score: RMFA, per source group and overall.")
     roles = ("reference",)
+    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.tasks = tuple(t for t in dict.fromkeys(config.tasks) if t in T3_TASKS)
+        known = t3_tasks(config.platform)
+        self.tasks = tuple(t for t in dict.fromkeys(config.tasks) if t in known)
         if not self.tasks:
-            raise ValueError(f"T3 runs on {', '.join(T3_TASKS)} (trained policies and operator models); none selected")
-        self.rig = RigCache(_Rig)
+            raise ValueError(f"T3 runs on {', '.join(known)} (trained policies and operator models); none selected")
+        self.rig = RigCache(lambda task: _Rig(task, config.platform))
         self._groups: dict[tuple[str, int], dict | str] = {}
 
     def close(self) -> None:

@@ -131,6 +131,40 @@ class MLPPolicy(nn.Module):
         return self.net((x - self.x_mean) / self.x_std) * self.y_std + self.y_mean
 
 
+def fit(X: np.ndarray, Y: np.ndarray, cfg: dict, log) -> tuple[MLPPolicy, MLPPolicy, list[float]]:
+    """Adam + cosine decay on MSE of normalised targets; returns (early, late) models and a loss log."""
+    torch.manual_seed(cfg["seed"])
+    gen = torch.Generator().manual_seed(cfg["seed"])
+    x, y = torch.from_numpy(X), torch.from_numpy(Y)
+    model = MLPPolicy(X.shape[1], tuple(cfg["hidden"]), Y.shape[1])
+    model.x_mean.copy_(x.mean(0))
+    model.x_std.copy_(x.std(0).clamp_min(cfg["std_floor"]))
+    model.y_mean.copy_(y.mean(0))
+    model.y_std.copy_(y.std(0).clamp_min(cfg["std_floor"]))
+    yn = (y - model.y_mean) / model.y_std
+    opt = torch.optim.AdamW(model.net.parameters(), lr=cfg["lr"], weight_decay=cfg["weight_decay"])
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.5 * (1 + np.cos(np.pi * min(s, cfg["steps"]) / cfg["steps"])))
+    early, losses, running = None, [], 0.0
+    for step in range(1, cfg["steps"] + 1):
+        idx = torch.randint(len(x), (cfg["batch"],), generator=gen)
+        pred = model.net((x[idx] - model.x_mean) / model.x_std)
+        loss = torch.nn.functional.mse_loss(pred, yn[idx])
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        sched.step()
+        running += loss.item()
+        if step % 500 == 0:
+            losses.append(round(running / 500, 6))
+            running = 0.0
+            log(f"  step {step}: loss {losses[-1]:.4f}")
+        if step == cfg["early_steps"]:
+            early = MLPPolicy(X.shape[1], tuple(cfg["hidden"]), Y.shape[1])
+            early.load_state_dict(model.state_dict())
+    return early, model, losses
+
+
 def save_checkpoint(path: Path, model: MLPPolicy, meta: dict) -> None:
     """A small checkpoint: float32 weights and buffers plus JSON-able metadata."""
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -141,10 +175,18 @@ def save_checkpoint(path: Path, model: MLPPolicy, meta: dict) -> None:
 def load_checkpoint(path: Path) -> tuple[MLPPolicy, dict]:
     blob = torch.load(path, map_location="cpu", weights_only=True)
     meta = json.loads(blob["meta"])
-    model = MLPPolicy(meta["in_dim"], tuple(meta["hidden"]))
+    model = MLPPolicy(meta["in_dim"], tuple(meta["hidden"]), meta.get("out_dim", ACTION_DIM))
     model.load_state_dict(blob["state_dict"])
     model.eval()
     return model, meta
+
+
+def open_checkpoint(path: Path, rebuild: str, docs: str) -> tuple[MLPPolicy, dict]:
+    """Load a policy checkpoint, or raise PolicyCheckpointMissing naming the path and the rebuild command."""
+    if not Path(path).is_file():
+        raise PolicyCheckpointMissing(f"policy checkpoint {path} is missing; rebuild it with `.venv/bin/python "
+                                      f"{rebuild}` (see {docs})")
+    return load_checkpoint(Path(path))
 
 
 def sha256(path: Path) -> str:
@@ -162,11 +204,7 @@ class PolicySource:
             raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
         self.task, self.stage = task, stage
         self.path = checkpoint_path(task, stage, checkpoint_dir)
-        if not self.path.is_file():
-            raise PolicyCheckpointMissing(
-                f"policy checkpoint {self.path} is missing; rebuild the checkpoints with "
-                f"`.venv/bin/python {TRAIN_SCRIPT} --tasks {task}` (see docs/policies.md)")
-        self.model, self.meta = load_checkpoint(self.path)
+        self.model, self.meta = open_checkpoint(self.path, f"{TRAIN_SCRIPT} --tasks {task}", "docs/policies.md")
         if self.meta["task"] != task or self.meta["stage"] != stage:
             raise ValueError(f"{self.path} holds {self.meta['task']}/{self.meta['stage']}, not {task}/{stage}")
         if self.meta["feature_names"] != feature_names(task):

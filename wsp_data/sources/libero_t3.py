@@ -1,0 +1,222 @@
+"""T3's action sources on LIBERO: scripted operator models H1–H5 and behaviour-cloned policy checkpoints.
+
+Operators (`LiberoOperatorSource`) are the expert's pick-and-place script (`PickPlaceScript`) run with a
+documented style, every parameter in the provenance:
+- H1 slow: servo gain ×0.35 and arm actions bounded to ±0.35 (the expert: ±0.9), gripper held 1.5× longer.
+- H2 fast: gain ×1.8, looser waypoint tolerance (1.6×), gripper held 0.6× as long.
+- H3 jerky: i.i.d. Gaussian noise (σ = 0.15 OSC units, seeded by the scene seed) on the arm dimensions.
+- H4 hesitant: at every waypoint it stops short (60% of the way), idles 8 steps, backs off 2 cm and re-approaches.
+- H5 another approach path: cruises 10 cm higher and comes down onto the grasp from 6 cm beside it.
+Failures are kept (the T3 builder records success).
+
+Policies (`LiberoPolicySource`): an MLP (`policies.MLPPolicy`) from simulator state to the 7-D OSC action,
+trained by behaviour cloning on scripted-expert trajectories of training seeds
+(`scripts/train_libero_policies.py`); an early (10%) and a late (final) checkpoint per task in
+`wsp_data/sources/checkpoints/libero/`. Features: qpos (9), grip-site position (3) and rotation 6-D (6), per task
+object position (3), rotation 6-D (6) and position relative to the grip site (3), phase = step / the expert's
+mean length (1). Output: the 6 arm dimensions (bounded to ±0.9) and the gripper (snapped to ±1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
+from wsp_data.sources import libero_experts as lx
+from wsp_data.sources.libero_experts import PickPlaceScript, task_spec
+
+T3_TASKS = (
+    "libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
+    "libero_object/pick_up_the_butter_and_place_it_in_the_basket",
+    "libero_spatial/pick_up_the_black_bowl_from_table_center_and_place_it_on_the_plate",
+    "libero_goal/put_the_bowl_on_the_stove",
+    "libero_90/KITCHEN_SCENE1_put_the_black_bowl_on_the_plate",
+)
+STAGES = ("early", "late")
+OPERATOR_STEP_BUDGET = 2.5  # × the expert's step budget (H1 takes about twice the expert's time)
+CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints" / "libero"
+SETTLE_STEPS = 5
+MAX_STEPS_FACTOR = 1.5
+
+OPERATORS: dict[str, dict] = {
+    "H1": {"style": "slow", "gain": 0.35, "max_action": 0.35, "grip_steps": 1.5},
+    "H2": {"style": "fast", "gain": 1.8, "tol": 1.6, "grip_steps": 0.6},
+    "H3": {"style": "jerky", "noise": 0.15},
+    "H4": {"style": "hesitant", "stop_short": 0.6, "idle": 8, "back_off": 0.02},
+    "H5": {"style": "another approach path", "cruise_extra": 0.10, "side_approach": 0.06},
+}
+
+
+class OperatorScript(PickPlaceScript):
+    """The pick-and-place script with an operator's style."""
+
+    def __init__(self, p: LiberoPlatform, spec, seed: int, style: dict):
+        super().__init__(p, spec, seed)
+        self.style = style
+        self.gain = lx.GAIN * style.get("gain", 1.0)
+        self.max_steps = int(lx.MAX_STEPS * OPERATOR_STEP_BUDGET)
+        self.rng = np.random.default_rng([seed, 7])
+
+    def act(self, a: np.ndarray) -> None:
+        a = np.asarray(a, dtype=np.float64).copy()
+        if "noise" in self.style:
+            a[:6] += self.rng.normal(0.0, self.style["noise"], 6) * (np.abs(a[:6]).max() > 0)
+        bound = self.style.get("max_action", lx.MAX_ACTION)
+        a[:6] = np.clip(a[:6], -bound, bound)
+        super().act(a)
+
+    def move(self, target, yaw=None, tol: float = 0.006, max_steps: int = 60) -> bool:
+        s = self.style
+        target = np.asarray(target, dtype=np.float64)
+        budget = int(max_steps / min(s.get("gain", 1.0), 1.0))
+        if "stop_short" in s:  # stop short, idle, back off, re-approach
+            start = self.g.ee()
+            super().move(start + s["stop_short"] * (target - start), yaw=yaw, tol=tol, max_steps=budget)
+            for _ in range(s["idle"]):
+                self.act(np.array([0, 0, 0, 0, 0, 0, self.grip]))
+            super().move(self.g.ee() + np.r_[0, 0, s["back_off"]], yaw=yaw, tol=tol, max_steps=20)
+        return super().move(target, yaw=yaw, tol=tol * s.get("tol", 1.0), max_steps=budget)
+
+    def gripper(self, command: float, steps: int = 10) -> None:
+        super().gripper(command, max(1, round(steps * self.style.get("grip_steps", 1.0))))
+
+    def grasp(self) -> None:
+        if "side_approach" not in self.style:
+            return super().grasp()
+        grasp, yaw = self.grasp_point()
+        hi = self.g.box(self.spec.target)[1]
+        high = max(0.10, hi[2] - grasp[2] + 0.06) + self.style["cruise_extra"]
+        beside = grasp + np.r_[0.0, self.style["side_approach"], 0.0]
+        self.move(beside + [0, 0, high], yaw=yaw, max_steps=100)
+        self.move(beside + [0, 0, 0.03], yaw=yaw, tol=0.004, max_steps=60)
+        self.move(grasp, yaw=yaw, tol=0.004, max_steps=50)
+        self.gripper(GRIPPER_CLOSED, 12)
+
+
+@dataclass
+class OperatorAttempt:
+    actions: np.ndarray
+    success: bool
+
+
+class LiberoOperatorSource:
+    """One scripted operator model (H1–H5) on one LIBERO task, on its own state-only env."""
+
+    def __init__(self, task: str, operator: str):
+        if operator not in OPERATORS:
+            raise KeyError(f"unknown operator {operator!r}; operators: {', '.join(OPERATORS)}")
+        self.task, self.operator, self.style = task, operator, OPERATORS[operator]
+        self.spec = task_spec(task)
+        self.platform = LiberoPlatform(task, render=False, objects=self.spec.objects)
+
+    def attempt(self, seed: int) -> OperatorAttempt:
+        s = OperatorScript(self.platform, self.spec, seed, self.style)
+        ok = s.run()
+        if not s.actions:
+            s.act(np.array([0, 0, 0, 0, 0, 0, GRIPPER_OPEN]))
+        return OperatorAttempt(np.stack(s.actions), ok)
+
+    @property
+    def provenance(self) -> dict:
+        return {"kind": "scripted_operator", "operator": self.operator, "platform": "libero",
+                "model": "wsp_data.sources.libero_t3.OperatorScript", **self.style}
+
+    def close(self) -> None:
+        self.platform.close()
+
+
+# -- policies ---------------------------------------------------------------------------------------
+def feature_names(task: str) -> list[str]:
+    names = [f"q{i}" for i in range(9)] + ["ee_x", "ee_y", "ee_z"] + [f"ee_r{i}" for i in range(6)]
+    for obj in task_spec(task).objects:
+        names += [f"{obj}_{k}" for k in ("x", "y", "z", *(f"r{i}" for i in range(6)), "dx", "dy", "dz")]
+    return names + ["phase"]
+
+
+def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
+    from wsp_data.sources.policies import _rot6d
+
+    ee = np.asarray(observation.tcp_pose, dtype=np.float64)
+    parts = [np.asarray(observation.qpos, dtype=np.float64), ee[:3], _rot6d(ee[3:])]
+    for k in range(n_objects):
+        pose = np.asarray(observation.object_poses[k], dtype=np.float64)
+        parts += [pose[:3], _rot6d(pose[3:]), pose[:3] - ee[:3]]
+    parts.append([step / ref_length])
+    return np.concatenate(parts).astype(np.float32)
+
+
+def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) -> Path:
+    return Path(directory or CHECKPOINT_DIR) / f"{task.replace('/', '__')}_{stage}.pt"
+
+
+class LiberoPolicySource:
+    """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only LIBERO env."""
+
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
+        from wsp_data.sources.policies import open_checkpoint
+
+        if stage not in STAGES:
+            raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
+        self.task, self.stage = task, stage
+        self.path = checkpoint_path(task, stage, checkpoint_dir)
+        self.model, self.meta = open_checkpoint(self.path, f"scripts/train_libero_policies.py --tasks {task}",
+                                                "docs/libero.md")
+        if self.meta["feature_names"] != feature_names(task):
+            raise ValueError(f"{self.path} was trained on other state features than this code computes")
+        self.spec = task_spec(task)
+        self.ref_length = float(self.meta["expert_mean_length"])
+        self._platform: LiberoPlatform | None = None
+
+    @property
+    def platform(self) -> LiberoPlatform:
+        if self._platform is None:
+            self._platform = LiberoPlatform(self.task, render=False, objects=self.spec.objects)
+        return self._platform
+
+    def close(self) -> None:
+        if self._platform is not None:
+            self._platform.close()
+            self._platform = None
+
+    def act(self, observation, step: int) -> np.ndarray:
+        import torch
+
+        x = torch.from_numpy(features(observation, len(self.spec.objects), step, self.ref_length))[None]
+        with torch.no_grad():
+            y = self.model(x)[0].double().numpy()
+        arm = np.clip(y[:6], -lx.MAX_ACTION, lx.MAX_ACTION)
+        return np.array([*arm, GRIPPER_CLOSED if y[6] >= 0 else GRIPPER_OPEN], dtype=np.float32)
+
+    def default_max_steps(self) -> int:
+        return int(math.ceil(MAX_STEPS_FACTOR * self.ref_length))
+
+    def trajectory(self, seed: int, max_steps: int | None = None) -> tuple[np.ndarray, bool]:
+        """Closed-loop from scene `seed` until success has held SETTLE_STEPS steps or the budget (1.5 × the
+        expert's mean length) runs out: the executed (T, 7) stream and whether it ends in success."""
+        max_steps = self.default_max_steps() if max_steps is None else int(max_steps)
+        ob = self.platform.reset(seed)
+        actions, held = [], 0
+        for t in range(max_steps):
+            a = self.act(ob, t)
+            actions.append(a)
+            ob = self.platform.step(a)
+            held = held + 1 if ob.success else 0
+            if held >= SETTLE_STEPS:
+                break
+        return np.stack(actions), bool(ob.success)
+
+    @property
+    def provenance(self) -> dict:
+        from wsp_data.sources.policies import sha256
+
+        m = self.meta
+        return {"kind": "bc_policy", "platform": "libero", "task": self.task, "stage": self.stage,
+                "checkpoint": self.path.name, "checkpoint_sha256": sha256(self.path),
+                "training_steps": m["training_steps"], "total_training_steps": m["total_training_steps"],
+                "success_rate": m.get("success", {}).get("rate"), "success_seeds": m.get("success", {}).get("seeds"),
+                "max_steps": self.default_max_steps(), "training_config": m["training_config"]}
+
