@@ -361,14 +361,23 @@ class T4Builder(SuiteBuilder):
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        if config.platform == "libero":  # every LIBERO task grasps its target and has scene objects to spare
-            self.kind_tasks = {k: tuple(dict.fromkeys(config.tasks)) for k in KINDS}
+        if config.platform == "libero":
+            # every LIBERO task grasps its target and has scene objects to spare; but open fingers brush a tall
+            # target that nearly fills them (measured: the alphabet soup can, 8 of 8 false-contact proposals
+            # touched it), so false contact takes the tasks with a low target, as T5's push and tap do
+            from wsp_data.sources.libero_experts import task_spec
+            from wsp_data.sources.libero_primitives import compatible
+
+            tasks = tuple(dict.fromkeys(config.tasks))
+            low = tuple(t for t in tasks if compatible("push", task_spec(t)))
+            self.kind_tasks = {"distractor": tasks, "false_contact": low, "spatial_proximity": tasks}
         else:
             self.kind_tasks = {k: tuple(t for t in config.tasks if t in KIND_TASKS[k]) for k in KINDS}
         missing = [k for k, ts in self.kind_tasks.items() if not ts]
         if missing:
-            raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; tasks per kind: "
-                             + "; ".join(f"{k}: {', '.join(KIND_TASKS[k])}" for k in missing))
+            allowed = ("a task whose target is a bowl or a flat box" if config.platform == "libero" else
+                       "; ".join(f"{k}: {', '.join(KIND_TASKS[k])}" for k in missing))
+            raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; needs {allowed}")
         self.rig = RigCache(_LiberoTaskRig if config.platform == "libero" else _TaskRig)
 
     def plan(self, slot: int) -> SlotPlan:
