@@ -21,13 +21,13 @@ TINY_ARGS = {k: v for k, v in TINY.items() if k != "platform"}
 
 
 def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], out: Path | None = None,
-               **config) -> Path:
+               platform: str = "maniskill", **config) -> Path:
     """Build one config of a tiny real release into `out` (default: a fresh folder named `worldsimprobe`)."""
     from wsp_data.build import build
     from wsp_data.builders import BuildConfig
 
     out = out or tmp_path_factory.mktemp(suite) / "worldsimprobe"
-    result = build(BuildConfig(suite, "maniskill", count, tuple(tasks), **config), out, progress=False)
+    result = build(BuildConfig(suite, platform, count, tuple(tasks), **config), out, progress=False)
     assert result.assembled
     return out
 
@@ -78,4 +78,20 @@ def suites_release(tmp_path_factory) -> Path:
     for suite, count, tasks in (("t2", 3, T2_TASKS), ("t3", 8, ("PickCube",)), ("t4", 6, ("PickCube",)),
                                 ("t5", 8, ("PickCube",))):
         build_tiny(tmp_path_factory, suite, count, tasks, out=out)
+    return out
+
+
+LIBERO_TASKS = ("libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
+                "libero_object/pick_up_the_butter_and_place_it_in_the_basket")
+LIBERO_SUITES = (("t1", 2), ("t2", 2), ("t3", 8), ("t4", 3), ("t5", 4), ("train", 2))
+
+
+@pytest.fixture(scope="session")
+def libero_release(tmp_path_factory) -> Path:
+    """One real LIBERO release over LIBERO_TASKS (a tall can, a flat box: push and tap need the low one):
+    T1 (2 triplets), T2 (2 cross-task replays), T3 (one group of all eight sources, on the first task), T4 (one
+    per kind), T5 (one per primitive), train (2)."""
+    out = tmp_path_factory.mktemp("libero") / "worldsimprobe"
+    for suite, count in LIBERO_SUITES:
+        build_tiny(tmp_path_factory, suite, count, LIBERO_TASKS, out=out, platform="libero")
     return out
