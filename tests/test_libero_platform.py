@@ -78,12 +78,15 @@ def test_scene_layout_does_not_depend_on_what_ran_before(render):
 
 
 def test_several_rendering_envs_in_one_process_render_their_own_scene(render):
-    """robosuite renders into whichever GL context is current; the platform makes its own current first."""
+    """robosuite renders into, and MuJoCo frees GL objects of, whichever GL context is current; the platform
+    makes its own current first, both when it renders and when it closes."""
     before = render.reset(3)
     with LiberoPlatform(LIBERO_TASKS[1], render=True) as other:
         other.reset(3)
         after = render.reset(3)
-    assert np.array_equal(before.rgb, after.rgb) and np.array_equal(before.mask, after.mask)
+    closed = render.reset(3)  # after the other env freed its GL objects
+    for ob in (after, closed):
+        assert np.array_equal(before.rgb, ob.rgb) and np.array_equal(before.mask, ob.mask)
 
 
 def test_joint_stream_holds_the_positions_each_action_reached(expert):

@@ -139,6 +139,11 @@ class LiberoPlatform:
 
     # -- lifecycle ------------------------------------------------------------------------------
     def close(self) -> None:
+        ctx = self.sim._render_context_offscreen if self.render else None
+        if ctx is not None:  # MuJoCo frees GL objects in whichever context is current: make it this env's own
+            ctx.gl_ctx.make_current()
+            ctx.con.free()
+            ctx.gl_ctx.free()
         self.env.close()
 
     def __enter__(self) -> LiberoPlatform:
