@@ -122,6 +122,7 @@ class PickPlaceScript:
         self.grip = GRIPPER_OPEN
         self.gain = GAIN
         self.max_steps = MAX_STEPS
+        self.success_wait: int | None = None  # steps to wait for the goal after placing (None: to the budget)
 
     # -- primitives ----------------------------------------------------------------------------------
     def act(self, a: np.ndarray) -> None:
@@ -227,9 +228,11 @@ class PickPlaceScript:
         try:
             self.grasp()
             self.place()
+            placed = len(self.actions)
             while self.succeeded_at is None or len(self.actions) < self.succeeded_at + HOLD_AFTER_SUCCESS:
                 self.act(np.array([0, 0, 0, 0, 0, 0, GRIPPER_OPEN]))
-                if self.succeeded_at is None and len(self.actions) > self.max_steps - HOLD_AFTER_SUCCESS:
+                late = self.success_wait is not None and len(self.actions) - placed > self.success_wait
+                if self.succeeded_at is None and (late or len(self.actions) > self.max_steps - HOLD_AFTER_SUCCESS):
                     return False
         except OutOfTime:
             return False

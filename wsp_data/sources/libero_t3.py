@@ -38,6 +38,7 @@ T3_TASKS = (
 )
 STAGES = ("early", "late")
 OPERATOR_STEP_BUDGET = 2.5  # × the expert's step budget (H1 takes about twice the expert's time)
+OPERATOR_SUCCESS_WAIT = 20  # steps an operator waits for the goal after its place move; then it has failed
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints" / "libero"
 SETTLE_STEPS = 5
 MAX_STEPS_FACTOR = 1.5
@@ -59,6 +60,7 @@ class OperatorScript(PickPlaceScript):
         self.style = style
         self.gain = lx.GAIN * style.get("gain", 1.0)
         self.max_steps = int(lx.MAX_STEPS * OPERATOR_STEP_BUDGET)
+        self.success_wait = OPERATOR_SUCCESS_WAIT
         self.rng = np.random.default_rng([seed, 7])
 
     def act(self, a: np.ndarray) -> None:
