@@ -40,6 +40,20 @@ def osc_blocked(qpos: np.ndarray, tcp_pose: np.ndarray, actions: np.ndarray) -> 
     return len(stalled) >= BLOCK_STEPS and bool(sliding_window_view(stalled, BLOCK_STEPS).all(axis=1).any())
 
 
+class PlatformError(RuntimeError):
+    """A task or stream a platform cannot run."""
+
+
+def checked_stream(actions, dim: int) -> np.ndarray:
+    """An action stream as float32 (T, dim), or PlatformError saying what is wrong with it."""
+    actions = np.asarray(actions, dtype=np.float32)
+    if actions.ndim != 2 or actions.shape[1] != dim or len(actions) == 0:
+        raise PlatformError(f"expected a (T, {dim}) action stream, got shape {actions.shape}")
+    if not np.isfinite(actions).all():
+        raise PlatformError("action stream contains NaN or infinite values")
+    return actions
+
+
 @dataclass(frozen=True)
 class PlatformKit:
     name: str

@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wsp_data.platforms import PlatformError, checked_stream
 from wsp_data.platforms.libero_runtime import configure_libero
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS
 
@@ -43,10 +44,6 @@ MASK_ARM, MASK_DISTAL = 1, 2
 SETTLE_STEPS = 10  # zero actions after layout, before frame 0: objects dropped by the sampler come to rest
 DISTAL_BODIES = ("robot0_link7", "robot0_right_hand")  # plus every gripper0_* body (hand, fingers, pads)
 SUITES = ("libero_object", "libero_spatial", "libero_goal", "libero_10", "libero_90")
-
-
-class PlatformError(RuntimeError):
-    """A task or stream the platform cannot run."""
 
 
 @dataclass
@@ -352,11 +349,7 @@ class LiberoPlatform:
     # -- replay -----------------------------------------------------------------------------------
     def replay(self, seed: int, actions: np.ndarray, placements: dict[str, np.ndarray] | None = None) -> Rollout:
         """Restore scene `seed` (and `placements`) and execute a (T, 7) OSC stream, recording every frame."""
-        actions = np.asarray(actions, dtype=np.float32)
-        if actions.ndim != 2 or actions.shape[1] != ACTION_DIM or len(actions) == 0:
-            raise PlatformError(f"expected a (T, {ACTION_DIM}) action stream, got shape {actions.shape}")
-        if not np.isfinite(actions).all():
-            raise PlatformError("action stream contains NaN or infinite values")
+        actions = checked_stream(actions, ACTION_DIM)
         ro = Rollout(self.task, int(seed), actions, np.zeros((len(actions), JOINT_ACTION_DIM), dtype=np.float32))
         ro.observations.append(self.reset(seed, placements))
         if self.render:

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wsp_data.platforms import PlatformError, checked_stream
 from wsp_data.platforms.runtime import configure_cpu_rendering
 from wsp_data.schema import ACTION_DIM, IMAGE_SIZE, MAX_OBJECTS
 
@@ -40,10 +41,6 @@ DISTAL_LINKS = frozenset({
     "panda_leftfinger_pad", "panda_rightfinger_pad", "camera_link", "camera_mount",
 })
 GRIPPER_OPEN, GRIPPER_CLOSED = 1.0, -1.0
-
-
-class PlatformError(RuntimeError):
-    """A task or stream the platform cannot run."""
 
 
 @dataclass(frozen=True)
@@ -279,11 +276,7 @@ class ManiSkillPlatform:
     # -- replay -----------------------------------------------------------------------------------
     def replay(self, seed: int, actions: np.ndarray, placements: dict[str, np.ndarray] | None = None) -> Rollout:
         """Reset to `seed` (and `placements`) and execute a (T, 8) `pd_joint_pos` stream, recording every frame."""
-        actions = np.asarray(actions, dtype=np.float32)
-        if actions.ndim != 2 or actions.shape[1] != ACTION_DIM or len(actions) == 0:
-            raise PlatformError(f"expected a (T, {ACTION_DIM}) action stream, got shape {actions.shape}")
-        if not np.isfinite(actions).all():
-            raise PlatformError("action stream contains NaN or infinite values")
+        actions = checked_stream(actions, ACTION_DIM)
         if self.control_mode != "pd_joint_pos":
             raise PlatformError("replay needs a pd_joint_pos platform")
         ro = Rollout(self.task, int(seed), actions, np.stack([self.ee_action(a) for a in actions]))
