@@ -24,7 +24,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -34,7 +33,7 @@ from wsp_data.sources.libero_t3 import (  # noqa: E402
     CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, LiberoPolicySource, checkpoint_path,
     feature_names, features,
 )
-from wsp_data.sources.policies import TRAINING_CONFIG, fit, save_checkpoint, sha256  # noqa: E402
+from wsp_data.sources.policies import fit, save_checkpoint, sha256, start_training, training_log  # noqa: E402
 
 EVAL_SEED_BASE = 910_000
 
@@ -118,16 +117,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not 0 < args.early_steps < args.steps:
         ap.error("need 0 < --early-steps < --steps")
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-
-    def log(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
-
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    config_path = out / TRAINING_CONFIG
-    config = json.loads(config_path.read_text()) if config_path.is_file() else {"tasks": {}}
+    log, out = training_log, args.out
+    config, config_path = start_training(out)
     eval_seeds = [EVAL_SEED_BASE + k for k in range(args.eval_seeds)]
     for task in args.tasks:
         X, Y, ref, info = collect(task, args.demos, args.noisy_rollouts, args.noise_std, log)

@@ -25,7 +25,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -33,8 +32,8 @@ sys.path.insert(0, str(ROOT))
 from wsp_data.platforms.maniskill import Observation  # noqa: E402  (sets the rendering env vars first)
 from wsp_data.sources.experts import ExpertSource  # noqa: E402
 from wsp_data.sources.policies import (  # noqa: E402
-    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, TRAINING_CONFIG, PolicySource,
-    action_target, feature_names, features, read_goal, save_checkpoint, sha256,
+    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, PolicySource, action_target, feature_names,
+    features, read_goal, save_checkpoint, sha256, start_training, training_log,
 )
 from wsp_data.sources.policies import fit as train  # noqa: E402
 
@@ -200,17 +199,8 @@ def main(argv=None) -> int:
     if not 0 < args.early_steps < args.steps:
         ap.error("need 0 < --early-steps < --steps")
     cache = args.cache if str(args.cache) not in ("", ".") else None
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-
-    def log(msg: str) -> None:
-        print(msg, file=sys.stderr, flush=True)
-
-    out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    config_path = out / TRAINING_CONFIG
-    config = json.loads(config_path.read_text()) if config_path.is_file() else {}
-    config.setdefault("tasks", {})
+    log, out = training_log, args.out
+    config, config_path = start_training(out)
     from wsp_data.platforms.maniskill import ManiSkillPlatform
 
     with ManiSkillPlatform("PickCube", render=False) as p:  # the Panda's joint limits (same robot in every task)

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wsp_data.platforms import Rollout
+
 SLOT_DIR = "slot_{slot:06d}"
 SLOT_JSON = "slot.json"
 CONFIG_JSON = "build_config.json"
@@ -40,8 +42,7 @@ class RolloutArrays:
     extrinsic: np.ndarray
 
     @classmethod
-    def from_rollout(cls, role: str, ro) -> RolloutArrays:
-        """From a platform `Rollout` (ManiSkill or LIBERO: the same fields)."""
+    def from_rollout(cls, role: str, ro: Rollout) -> RolloutArrays:
         return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("qpos"), ro.stack("tcp_pose"),
                    ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
                    ro.alt_actions, ro.intrinsic, ro.extrinsic)

@@ -19,7 +19,7 @@ import numpy as np
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache, rollout_problem
 from wsp_data.builders.validity import MAX_JOINT_SPEED
-from wsp_data.platforms import BLOCK_RAD, BLOCK_STEPS, PlatformKit, joint_blocked, kit
+from wsp_data.platforms import BLOCK_STEPS, PlatformKit, joint_blocked, kit  # noqa: F401  (BLOCK_STEPS: T2's rule, read by tests)
 from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows

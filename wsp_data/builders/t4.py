@@ -25,7 +25,7 @@ import cv2
 import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache, rollout_problem
+from wsp_data.builders.rig import RigCache, TaskRig, rollout_problem
 from wsp_data.platforms import kit
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
@@ -116,6 +116,12 @@ def static(poses: np.ndarray) -> bool:
     return bool(dp.max() < POS_TOL and dq.max() < ROT_TOL)
 
 
+def fingers_closed(qpos: np.ndarray) -> bool:
+    """Some frame has a finger joint nearer than FINGER_OPEN to closed (ManiSkill's fingers open to +0.04,
+    LIBERO's to +0.04 and −0.04)."""
+    return bool((np.abs(qpos[:, 7:9]) < FINGER_OPEN).any())
+
+
 def false_contact(rig, base, source: np.ndarray, sight: _Sight) -> Proposal | str:
     """The expert's stream with the gripper command clamped fully open throughout (the platform's own
     gripper dimension and open value)."""
@@ -159,9 +165,6 @@ class _TaskRig:
 
     def invalid(self, ro) -> str | None:
         return rollout_problem(self.kit, self.qlimits, ro)
-
-    def gripper_closed(self, qpos: np.ndarray) -> bool:
-        return bool((qpos[:, 7:9] < FINGER_OPEN).any())
 
     def footprint(self, qpos: np.ndarray) -> np.ndarray:
         """xy of every robot link origin below REACH_Z over a rollout (forward kinematics of its qpos): the
@@ -227,23 +230,14 @@ class _TaskRig:
         return "no_clear_placement"
 
 
-class _LiberoTaskRig:
+class _LiberoTaskRig(TaskRig):
     """One LIBERO task's simulators in one worker, and the three kinds' proposals. The swept region, object
     boxes and placements are measured on the scene itself (every scene object, not only the task's, must stay
     clear); heights are taken relative to the surface the target rests on."""
 
     def __init__(self, task: str):
-        self.kit = kit("libero")
-        self.expert = self.kit.make_expert(task)
-        self.spec = self.expert.spec
-        self.state = self.expert.replayer
-        self.render = self.kit.make_renderer(task, self.spec.objects)
-        self.qlimits = self.state.qlimits
+        super().__init__(task, "libero")
         self.intrinsic, self.extrinsic = self.state.camera_params()
-
-    def close(self) -> None:
-        self.expert.close()
-        self.render.close()
 
     def replay(self, platform, seed: int, p: Proposal):
         platform.track(p.objects)
@@ -252,24 +246,19 @@ class _LiberoTaskRig:
         finally:
             platform.track(self.spec.objects)
 
-    def invalid(self, ro) -> str | None:
-        return rollout_problem(self.kit, self.qlimits, ro)
-
-    def gripper_closed(self, qpos: np.ndarray) -> bool:
-        return bool((np.abs(qpos[:, 7:9]) < FINGER_OPEN).any())
-
     def sight(self, seed: int) -> _Sight:
         return _Sight(self.intrinsic, self.extrinsic, self.render.reset(seed).mask)
 
-    def _scene(self, seed: int) -> tuple[dict[str, np.ndarray], float]:
-        """xy boxes of every movable object at frame 0 of `seed`, and the height of the target's support."""
+    def _scene(self, seed: int) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+        """Reset the unrendered env to frame 0 of `seed` (the proposals read its poses) and return the xy box
+        and the bottom height of every movable object."""
         self.state.reset(seed)
-        boxes = {}
+        boxes, bottoms = {}, {}
         for name in self.state.movable_objects():
             pts = self.state.collision_points(name)
             boxes[name] = np.stack([pts[:, :2].min(0), pts[:, :2].max(0)])
-        support = float(self.state.collision_points(self.spec.target)[:, 2].min())
-        return boxes, support
+            bottoms[name] = float(pts[:, 2].min())
+        return boxes, bottoms
 
     def _footprint(self, qpos: np.ndarray, support: float) -> np.ndarray:
         pts = self.state.link_positions(qpos)
@@ -298,15 +287,14 @@ class _LiberoTaskRig:
         objects = self.spec.objects
         if len(objects) >= MAX_OBJECTS:
             return "too_many_objects"
-        boxes, support = self._scene(base.seed)
-        candidates = [n for n in self.state.movable_objects() if n not in objects
-                      and abs(self.state.collision_points(n)[:, 2].min() - support) <= LIBERO_SUPPORT_TOL]
+        boxes, bottoms = self._scene(base.seed)
+        support = bottoms[self.spec.target]
+        candidates = [n for n in bottoms if n not in objects and abs(bottoms[n] - support) <= LIBERO_SUPPORT_TOL]
         if not candidates:
             return "no_distractor_object"
         footprint = self._footprint(base.stack("qpos"), support)
         for i in rng.permutation(len(candidates)):
             name = candidates[i]
-            self.state.reset(base.seed)
             placed = self._place(name, boxes, footprint, DISTRACTOR_MARGIN, sight, rng)
             if placed is not None:
                 params = {"kind": "distractor", "object": name, "from": placed[0].tolist(), "pose": placed[1].tolist()}
@@ -317,9 +305,8 @@ class _LiberoTaskRig:
         return false_contact(self, base, source, sight)
 
     def spatial_proximity(self, base, source: np.ndarray, sight: _Sight, rng: np.random.Generator) -> Proposal | str:
-        boxes, support = self._scene(base.seed)
-        footprint = self._footprint(base.stack("qpos"), support)
-        self.state.reset(base.seed)
+        boxes, bottoms = self._scene(base.seed)
+        footprint = self._footprint(base.stack("qpos"), bottoms[self.spec.target])
         placed = self._place(self.spec.target, boxes, footprint, SWEPT_MARGIN, sight, rng)
         if placed is None:
             return "no_clear_placement"
@@ -366,10 +353,10 @@ class T4Builder(SuiteBuilder):
             # target that nearly fills them (measured: the alphabet soup can, 8 of 8 false-contact proposals
             # touched it), so false contact takes the tasks with a low target, as T5's push and tap do
             from wsp_data.sources.libero_experts import task_spec
-            from wsp_data.sources.libero_primitives import compatible
+            from wsp_data.sources.libero_primitives import low_target
 
             tasks = tuple(dict.fromkeys(config.tasks))
-            low = tuple(t for t in tasks if compatible("push", task_spec(t)))
+            low = tuple(t for t in tasks if low_target(task_spec(t)))
             self.kind_tasks = {"distractor": tasks, "false_contact": low, "spatial_proximity": tasks}
         else:
             self.kind_tasks = {k: tuple(t for t in config.tasks if t in KIND_TASKS[k]) for k in KINDS}
@@ -403,7 +390,7 @@ class T4Builder(SuiteBuilder):
             return None if ro.success else "task_failed"
         if contacts.any():
             return "other_object_contacted"
-        if kind == "false_contact" and rig.gripper_closed(ro.stack("qpos")):
+        if kind == "false_contact" and fingers_closed(ro.stack("qpos")):
             return "gripper_closed"
         return None
 

@@ -10,7 +10,7 @@ its controller accepts.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -38,6 +38,41 @@ def osc_blocked(qpos: np.ndarray, tcp_pose: np.ndarray, actions: np.ndarray) -> 
     achieved = np.linalg.norm(np.diff(tcp_pose[:, :3], axis=0), axis=1)
     stalled = (commanded >= OSC_COMMANDED) & (achieved < OSC_STALLED * commanded)
     return len(stalled) >= BLOCK_STEPS and bool(sliding_window_view(stalled, BLOCK_STEPS).all(axis=1).any())
+
+
+@dataclass
+class Observation:
+    """What a platform records after a reset or a step."""
+
+    qpos: np.ndarray  # (9,) float32: 7 arm joints + 2 finger joints
+    tcp_pose: np.ndarray  # (7,) float32: end-effector (TCP / grip site) world position + quaternion (wxyz)
+    object_poses: np.ndarray  # (MAX_OBJECTS, 7) float32, NaN where the task has fewer objects
+    contacts: np.ndarray  # (MAX_OBJECTS,) bool: any robot link touches the object
+    success: bool
+    rgb: np.ndarray | None = None  # (128, 128, 3) uint8
+    mask: np.ndarray | None = None  # (128, 128) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
+
+
+@dataclass
+class Rollout:
+    """A replayed stream: T native actions, the other stream beside them (ManiSkill: end-effector, column
+    `action.ee`; LIBERO: joint, column `action.joint`) and the T+1 observations around them (frame 0 = after
+    reset)."""
+
+    task: str
+    seed: int
+    actions: np.ndarray  # (T, D) float32 native stream as executed
+    alt_actions: np.ndarray  # (T, D') float32 the other stream
+    observations: list[Observation] = field(default_factory=list)
+    intrinsic: np.ndarray | None = None  # (3, 3) OpenCV intrinsics
+    extrinsic: np.ndarray | None = None  # (3, 4) OpenCV world→camera
+
+    @property
+    def success(self) -> bool:
+        return bool(self.observations[-1].success)
+
+    def stack(self, name: str) -> np.ndarray:
+        return np.stack([getattr(o, name) for o in self.observations])
 
 
 class PlatformError(RuntimeError):

@@ -17,11 +17,11 @@ import contextlib
 import io
 import logging
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from wsp_data.platforms import PlatformError, checked_stream
+from wsp_data.platforms import Observation, PlatformError, Rollout, checked_stream
 from wsp_data.platforms.libero_runtime import configure_libero
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS
 
@@ -32,9 +32,7 @@ from libero.libero import benchmark  # noqa: E402
 from libero.libero.envs import OffScreenRenderEnv  # noqa: E402
 from libero.libero.envs.env_wrapper import ControlEnv  # noqa: E402
 
-logging.getLogger("robosuite").setLevel(logging.ERROR)
-for _name in ("robosuite_logs",):
-    logging.getLogger(_name).setLevel(logging.ERROR)
+logging.getLogger("robosuite_logs").setLevel(logging.ERROR)  # robosuite's own logger
 
 CAMERA = "agentview"
 ACTION_DIM = 7
@@ -44,37 +42,6 @@ MASK_ARM, MASK_DISTAL = 1, 2
 SETTLE_STEPS = 10  # zero actions after layout, before frame 0: objects dropped by the sampler come to rest
 DISTAL_BODIES = ("robot0_link7", "robot0_right_hand")  # plus every gripper0_* body (hand, fingers, pads)
 SUITES = ("libero_object", "libero_spatial", "libero_goal", "libero_10", "libero_90")
-
-
-@dataclass
-class Observation:
-    qpos: np.ndarray  # (9,) float32: 7 arm joints + 2 finger joints
-    tcp_pose: np.ndarray  # (7,) float32: end-effector site position + quaternion (wxyz), world frame
-    object_poses: np.ndarray  # (MAX_OBJECTS, 7) float32, NaN where the task has fewer objects
-    contacts: np.ndarray  # (MAX_OBJECTS,) bool
-    success: bool
-    rgb: np.ndarray | None = None
-    mask: np.ndarray | None = None
-
-
-@dataclass
-class Rollout:
-    """A replayed stream: T native actions, the joint-space stream beside them, T+1 observations."""
-
-    task: str
-    seed: int
-    actions: np.ndarray  # (T, 7) float32 OSC stream as executed
-    alt_actions: np.ndarray  # (T, 8) float32 joint positions reached + gripper command
-    observations: list[Observation] = field(default_factory=list)
-    intrinsic: np.ndarray | None = None
-    extrinsic: np.ndarray | None = None
-
-    @property
-    def success(self) -> bool:
-        return bool(self.observations[-1].success)
-
-    def stack(self, name: str) -> np.ndarray:
-        return np.stack([getattr(o, name) for o in self.observations])
 
 
 @dataclass(frozen=True)

@@ -12,11 +12,11 @@ from __future__ import annotations
 import contextlib
 import io
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
-from wsp_data.platforms import PlatformError, checked_stream
+from wsp_data.platforms import Observation, PlatformError, Rollout, checked_stream
 from wsp_data.platforms.runtime import configure_cpu_rendering
 from wsp_data.schema import ACTION_DIM, IMAGE_SIZE, MAX_OBJECTS
 
@@ -91,39 +91,6 @@ def _env_class(env_id: str, extras: tuple[ExtraActor, ...]):
 
     SceneWithExtras.__name__ = f"{base.__name__}WithExtras"
     return SceneWithExtras
-
-
-@dataclass
-class Observation:
-    """What the platform records after a reset or a step."""
-
-    qpos: np.ndarray  # (9,) float32: 7 arm joints + 2 finger joints
-    tcp_pose: np.ndarray  # (7,) float32: world position + quaternion (wxyz)
-    object_poses: np.ndarray  # (MAX_OBJECTS, 7) float32, NaN where the task has fewer objects
-    contacts: np.ndarray  # (MAX_OBJECTS,) bool: any robot link touches the object
-    success: bool
-    rgb: np.ndarray | None = None  # (128, 128, 3) uint8
-    mask: np.ndarray | None = None  # (128, 128) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
-
-
-@dataclass
-class Rollout:
-    """A replayed stream: T actions and the T+1 observations around them (frame 0 = after reset)."""
-
-    task: str
-    seed: int
-    actions: np.ndarray  # (T, 8) float32 joint-space stream as executed
-    alt_actions: np.ndarray  # (T, 7) float32 end-effector stream (FK of the joint targets), column action.ee
-    observations: list[Observation] = field(default_factory=list)
-    intrinsic: np.ndarray | None = None  # (3, 3) OpenCV intrinsics
-    extrinsic: np.ndarray | None = None  # (3, 4) OpenCV world→camera
-
-    @property
-    def success(self) -> bool:
-        return bool(self.observations[-1].success)
-
-    def stack(self, name: str) -> np.ndarray:
-        return np.stack([getattr(o, name) for o in self.observations])
 
 
 def _np(x) -> np.ndarray:

@@ -19,7 +19,6 @@ import numpy as np
 
 from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform, libero_task
 
-POS_SCALE = 0.05  # m per unit of OSC position action (robosuite's OSC_POSE output_max)
 ROT_SCALE = 0.5  # rad per unit of OSC rotation action
 GAIN = 12.0  # proportional gain: action = GAIN · error (m), clipped to ±MAX_ACTION
 MAX_ACTION = 0.9  # arm action bound: leaves T1's largest perturbation (0.02) inside the controller's [−1, 1]
@@ -117,7 +116,6 @@ class PickPlaceScript:
         self.g = Scene(p)
         self.actions: list[np.ndarray] = []
         self.observation = p.reset(seed)  # the latest observation
-        self.success = self.observation.success
         self.succeeded_at: int | None = None
         self.grip = GRIPPER_OPEN
         self.gain = GAIN
@@ -203,14 +201,19 @@ class PickPlaceScript:
         return np.array([xy[0] + held[0], xy[1] + held[1], top + held[2] + 0.02])
 
     def grasp(self) -> None:
-        """Approach above the target's grasp point (turning the hand), descend and close the fingers."""
+        """Approach the target's grasp point through `approach` (turning the hand), descend and close."""
         grasp, yaw = self.grasp_point()
-        lo, hi = self.g.box(self.spec.target)
-        above = grasp + [0, 0, max(0.10, hi[2] - grasp[2] + 0.06)]
-        self.move(above, yaw=yaw, max_steps=80)
-        self.move(above, yaw=yaw, tol=0.004, max_steps=20)
+        clear = max(0.10, self.g.box(self.spec.target)[1][2] - grasp[2] + 0.06)
+        for point, tol, steps in self.approach(grasp, clear):
+            self.move(point, yaw=yaw, tol=tol, max_steps=steps)
         self.move(grasp, yaw=yaw, tol=0.004, max_steps=50)
         self.gripper(GRIPPER_CLOSED, 12)
+
+    def approach(self, grasp: np.ndarray, clear: float) -> list[tuple[np.ndarray, float, int]]:
+        """Waypoints (point, tolerance, step budget) before the final descent: `clear` above the grasp point,
+        reached, then settled."""
+        above = grasp + [0, 0, clear]
+        return [(above, 0.006, 80), (above, 0.004, 20)]
 
     def place(self) -> None:
         """Lift the held target, carry it over its destination, lower it, open the fingers and back off."""
@@ -236,7 +239,7 @@ class PickPlaceScript:
                     return False
         except OutOfTime:
             return False
-        return bool(self.p._observe().success)
+        return bool(self.observation.success)
 
 
 class OutOfTime(Exception):

@@ -19,7 +19,6 @@ import numpy as np
 from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
 from wsp_data.sources.libero_experts import LiberoTaskSpec, OutOfTime, PickPlaceScript
 
-PRIMITIVES = ("push", "pull", "tap", "drop")
 # Push and tap need a target the hand can pass over: the Panda hand's collision body sits ~2 cm above the
 # fingertips, so beside a tall can or carton it hits the top (measured: the alphabet soup never moved; the
 # milk carton toppled). Bowls and flat boxes (≤ 5 cm) slide cleanly.
@@ -51,9 +50,8 @@ def _free_direction(s: PickPlaceScript) -> np.ndarray:
     return max(DIRECTIONS, key=room)
 
 
-def _beside(s: PickPlaceScript, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """(the point `STANDOFF` before the target's side along `d`, at finger height; the target's centre; its
-    half extent along d)."""
+def _beside(s: PickPlaceScript, d: np.ndarray) -> np.ndarray:
+    """The point `STANDOFF` before the target's side along `d`, at finger height."""
     lo, hi = s.g.box(s.spec.target)
     centre = (lo + hi) / 2
     half = float(np.abs(d[:2]) @ ((hi - lo)[:2] / 2))
@@ -61,7 +59,7 @@ def _beside(s: PickPlaceScript, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     z = max(lo[2] + min(0.025, 0.5 * (hi[2] - lo[2])), hi[2] - HAND_CLEARANCE)
     start = centre - d * (half + STANDOFF)
     start[2] = z
-    return start, centre, half
+    return start
 
 
 def _approach(s: PickPlaceScript, point: np.ndarray) -> None:
@@ -79,7 +77,7 @@ def _withdraw(s: PickPlaceScript) -> None:
 
 def push(s: PickPlaceScript) -> None:
     d = _free_direction(s)
-    start, _, _ = _beside(s, d)
+    start = _beside(s, d)
     _approach(s, start)
     goal = start + d * (STANDOFF + PUSH_TRAVEL)
     for _ in range(80):
@@ -87,7 +85,7 @@ def push(s: PickPlaceScript) -> None:
         if np.linalg.norm(err[:2]) < 0.005:
             break
         a = np.zeros(7)
-        a[:3] = np.clip(12.0 * err, -PUSH_SPEED, PUSH_SPEED)
+        a[:3] = np.clip(s.gain * err, -PUSH_SPEED, PUSH_SPEED)
         a[6] = GRIPPER_CLOSED
         s.act(a)
     _withdraw(s)
@@ -107,7 +105,7 @@ def pull(s: PickPlaceScript) -> None:
 
 def tap(s: PickPlaceScript) -> None:
     d = _free_direction(s)
-    start, _, _ = _beside(s, d)
+    start = _beside(s, d)
     _approach(s, start)
     s.move(start, tol=0.003, max_steps=20)
     strike = start + d * (STANDOFF + TAP_REACH)
@@ -115,7 +113,7 @@ def tap(s: PickPlaceScript) -> None:
         if (strike - s.g.ee())[:2] @ d[:2] <= 0:
             break
         s.act(np.r_[d * 1.0, 0, 0, 0, GRIPPER_CLOSED])
-    s.move(start - d * 0.02 + [0, 0, 0.0], max_steps=20)
+    s.move(start - d * 0.02, max_steps=20)
     _withdraw(s)
 
 
@@ -130,11 +128,16 @@ def drop(s: PickPlaceScript) -> None:
 SCRIPTS: dict[str, Callable[[PickPlaceScript], None]] = {"push": push, "pull": pull, "tap": tap, "drop": drop}
 
 
+def low_target(spec: LiberoTaskSpec) -> bool:
+    """Whether the task's target is low enough for the hand to pass over it (a bowl or a flat box)."""
+    return any(k in spec.target for k in LOW_TARGETS)
+
+
 def compatible(primitive: str, spec: LiberoTaskSpec) -> bool:
     """Whether `primitive` can act on the task's target."""
     if primitive not in SCRIPTS:
-        raise KeyError(f"LIBERO has no primitive {primitive!r}; it uses {', '.join(PRIMITIVES)}")
-    return primitive in ("pull", "drop") or any(k in spec.target for k in LOW_TARGETS)
+        raise KeyError(f"LIBERO has no primitive {primitive!r}; it uses {', '.join(SCRIPTS)}")
+    return primitive in ("pull", "drop") or low_target(spec)
 
 
 def branch_stream(platform: LiberoPlatform, spec: LiberoTaskSpec, seed: int, source: np.ndarray, branch: int,

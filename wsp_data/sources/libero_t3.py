@@ -86,17 +86,11 @@ class OperatorScript(PickPlaceScript):
     def gripper(self, command: float, steps: int = 10) -> None:
         super().gripper(command, max(1, round(steps * self.style.get("grip_steps", 1.0))))
 
-    def grasp(self) -> None:
+    def approach(self, grasp: np.ndarray, clear: float) -> list[tuple[np.ndarray, float, int]]:
         if "side_approach" not in self.style:
-            return super().grasp()
-        grasp, yaw = self.grasp_point()
-        hi = self.g.box(self.spec.target)[1]
-        high = max(0.10, hi[2] - grasp[2] + 0.06) + self.style["cruise_extra"]
+            return super().approach(grasp, clear)
         beside = grasp + np.r_[0.0, self.style["side_approach"], 0.0]
-        self.move(beside + [0, 0, high], yaw=yaw, max_steps=100)
-        self.move(beside + [0, 0, 0.03], yaw=yaw, tol=0.004, max_steps=60)
-        self.move(grasp, yaw=yaw, tol=0.004, max_steps=50)
-        self.gripper(GRIPPER_CLOSED, 12)
+        return [(beside + [0, 0, clear + self.style["cruise_extra"]], 0.006, 100), (beside + [0, 0, 0.03], 0.004, 60)]
 
 
 @dataclass

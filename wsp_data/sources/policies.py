@@ -22,6 +22,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -179,6 +180,23 @@ def load_checkpoint(path: Path) -> tuple[MLPPolicy, dict]:
     model.load_state_dict(blob["state_dict"])
     model.eval()
     return model, meta
+
+
+def training_log(msg: str) -> None:
+    """The training scripts' progress line, on stderr."""
+    print(msg, file=sys.stderr, flush=True)
+
+
+def start_training(out: Path) -> tuple[dict, Path]:
+    """Set torch up for a reproducible CPU run (one thread, deterministic algorithms), create `out`, and return
+    its training record so far (`{"tasks": {…}}`) and the record's path."""
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / TRAINING_CONFIG
+    config = json.loads(path.read_text()) if path.is_file() else {}
+    config.setdefault("tasks", {})
+    return config, path
 
 
 def open_checkpoint(path: Path, rebuild: str, docs: str) -> tuple[MLPPolicy, dict]:
