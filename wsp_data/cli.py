@@ -17,7 +17,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from wsp_data.schema import DEFAULT_RELEASE_NAME, PLATFORMS, SUITES
+from wsp_data.platforms import KITS
+from wsp_data.schema import DEFAULT_RELEASE_NAME, SUITES
+from wsp_eval.registry import PluginError
 
 PAPER_COUNTS = {  # paper Table S3 (SPEC §3)
     "maniskill": {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360},
@@ -53,7 +55,7 @@ def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="wsp", description="WorldSimProbe: build and inspect benchmark releases.")
     sub = p.add_subparsers(dest="command", required=True)
     b = sub.add_parser("build", help="build (or resume) one suite×platform config of a release")
-    b.add_argument("--platform", choices=PLATFORMS, default="maniskill")
+    b.add_argument("--platform", choices=KITS, default="maniskill")
     b.add_argument("--suite", choices=SUITES, required=True)
     b.add_argument("--count", type=_positive,
                    help="instances to build (default: the paper's count; train: 100 episodes per task)")
@@ -68,7 +70,7 @@ def parser() -> argparse.ArgumentParser:
     i = sub.add_parser("info", help="summarise a release folder")
     i.add_argument("release", type=Path)
     s = sub.add_parser("sources", help="scripted expert success rate per task")
-    s.add_argument("--platform", choices=PLATFORMS, default="maniskill")
+    s.add_argument("--platform", choices=KITS, default="maniskill")
     s.add_argument("--seeds", type=_positive, default=20)
     s.add_argument("--tasks", nargs="+")
     s.add_argument("--out", type=Path, help="also write the Markdown table here")
@@ -147,7 +149,7 @@ def cmd_build(args) -> int:
         listed = "\n  ".join(known)
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
     try:
-        count = args.count or PAPER_COUNTS[args.platform].get(args.suite) or EPISODES_PER_TASK * len(tasks)
+        count = args.count or PAPER_COUNTS.get(args.platform, {}).get(args.suite) or EPISODES_PER_TASK * len(tasks)
         config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet)
@@ -296,13 +298,13 @@ def cmd_teleop(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
     try:
+        args = parser().parse_args(argv)
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
                     "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
                     "teleop": cmd_teleop}
         return commands[args.command](args)
-    except CliError as e:
+    except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

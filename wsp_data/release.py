@@ -16,16 +16,13 @@ import jinja2
 import pyarrow.parquet as pq
 
 import wsp_data
+from wsp_data.platforms import kit
 from wsp_data.schema import (
-    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, MAX_OBJECTS, PLATFORM_INFO, RELEASE_JSON, SEED_BASE,
-    SEED_SPAN, STAGING_DIR,
+    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, MAX_OBJECTS, RELEASE_JSON, SEED_BASE, SEED_SPAN, STAGING_DIR,
 )
+from wsp_eval.release_format import BENCHMARK_VERSION, ReleaseError, load_release
 
 CARDS_DIR = Path(__file__).resolve().parent.parent / "cards"
-
-
-class ReleaseError(RuntimeError):
-    """A folder that is not (or not yet) a readable WorldSimProbe release."""
 
 
 def code_version() -> str:
@@ -47,16 +44,6 @@ def sha256(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def load_release(root: Path) -> dict:
-    path = Path(root) / RELEASE_JSON
-    if not path.exists():
-        raise ReleaseError(f"{root}: not a WorldSimProbe release (no {RELEASE_JSON})")
-    try:
-        return json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise ReleaseError(f"{path}: unreadable ({e})") from e
 
 
 def write_release(root: Path, suites: dict) -> dict:
@@ -86,7 +73,7 @@ def write_release(root: Path, suites: dict) -> dict:
     if not card_configs:
         raise ReleaseError(f"{root}: no assembled config to describe")
     release = {
-        "name": root.name, "version": wsp_data.BENCHMARK_VERSION, "code_version": code_version(),
+        "name": root.name, "version": BENCHMARK_VERSION, "code_version": code_version(),
         "codebase_version": CODEBASE_VERSION, "configs": configs,
         "seed_ranges": {k: [v, v + SEED_SPAN - 1] for k, v in SEED_BASE.items()},
     }
@@ -113,7 +100,7 @@ def _ignored(rel: Path) -> bool:
 def _render_card(root: Path, release: dict, card_configs: list[dict]) -> None:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(CARDS_DIR), undefined=jinja2.StrictUndefined,
                              keep_trailing_newline=True)
-    platforms = [PLATFORM_INFO[p] for p in dict.fromkeys(c["platform"] for c in card_configs)]
+    platforms = [kit(p).info for p in dict.fromkeys(c["platform"] for c in card_configs)]
     text = env.get_template("dataset_card.md.j2").render(
         name=root.name, version=release["version"], code_version=release["code_version"],
         codebase_version=CODEBASE_VERSION, configs=card_configs, fps=platforms[0].fps, max_objects=MAX_OBJECTS,

@@ -1,36 +1,21 @@
-"""The release format: path templates, per-frame features, episode columns, seed ranges.
+"""The build side of the release format: seed ranges, per-frame features, what a platform stores.
 
-Every constant a reader of a release needs lives here, so builders, writer, release and tests agree.
+The names a reader of a release needs live in `wsp_eval.release_format` and are re-exported here, so builders,
+writer, release, tests and the evaluation side agree.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-# ManiSkill platform constants (SPEC §2): the platform module imports these, never the reverse, so that
-# readers of a release (wsp_eval) never import a simulator.
-FPS = 20
-IMAGE_SIZE = 128
+from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build side and tests import them from here)
+    BUILD_REPORT, CARD, CODEBASE_VERSION, CONFIG_NAME, CROISSANT, DEFAULT_RELEASE_NAME, EPISODE_COLUMNS, EPISODE_ID,
+    FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, MASK_KEY, MAX_OBJECTS, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR, SUITES,
+)
+
+# ManiSkill's native streams (SPEC §2): the platform module imports these, never the reverse.
 ACTION_DIM = 8  # 7 arm joint targets + gripper command (1 open … −1 closed)
 EE_ACTION_DIM = 7  # TCP target position in the robot base frame, XYZ Euler angles, gripper command
-MAX_OBJECTS = 4  # object pose / contact columns per frame (unused slots are NaN / False)
-
-DEFAULT_RELEASE_NAME = "worldsimprobe"
-CODEBASE_VERSION = "v3.0"  # LeRobot dataset format
-
-# -- release layout ---------------------------------------------------------------------------------
-RELEASE_JSON = "release.json"
-CARD = "README.md"
-CROISSANT = "croissant.json"
-INSTANCES = "instances.parquet"
-BUILD_REPORT = "build_report.json"  # per config, beside instances.parquet
-STAGING_DIR = ".wsp-staging"  # per config, under the release; removed once the config is assembled
-CONFIG_NAME = "{suite}_{platform}"  # e.g. t1_maniskill
-EPISODE_ID = "episode_{index:06d}"  # submission path component: <config>/<episode_id>/seed<k>.mp4
-INSTANCE_ID = "{config}/{slot:06d}"
-
-SUITES = ("t1", "t2", "t3", "t4", "t5", "train")
-PLATFORMS = ("maniskill", "libero")
 
 # Disjoint scene-seed ranges: a suite's slot k, attempt a uses base + 100·k + a (a < MAX_ATTEMPTS).
 MAX_ATTEMPTS = 100
@@ -48,15 +33,14 @@ def scene_seed(suite: str, slot: int, attempt: int) -> int:
 
 
 # -- per-frame features (LeRobot) ---------------------------------------------------------------------
-VIDEO_KEY = "observation.images.base_camera"  # ManiSkill's; a platform's own is `PLATFORM_INFO[p].video_key`
-MASK_KEY = "observation.robot_mask"
+VIDEO_KEY = "observation.images.base_camera"  # ManiSkill's; a platform's own is `kit(p).info.video_key`
 
 
-def frame_features(platform: str = "maniskill") -> dict:
-    """LeRobot feature spec of every rollout frame on `platform`. Frame t holds the observation at t and the
-    action applied after it; the last frame's action repeats the previous one and is never executed.
-    `action` is the platform's native stream; the other stream (`alt_action_key`) is stored beside it."""
-    info = PLATFORM_INFO[platform]
+def frame_features(info: PlatformInfo) -> dict:
+    """LeRobot feature spec of every rollout frame on the platform `info` describes. Frame t holds the
+    observation at t and the action applied after it; the last frame's action repeats the previous one and is
+    never executed. `action` is the platform's native stream; the other stream (`alt_action_key`) is stored
+    beside it."""
     img = (IMAGE_SIZE, IMAGE_SIZE, 3)
     hwc = ["height", "width", "channels"]
     return {
@@ -72,16 +56,6 @@ def frame_features(platform: str = "maniskill") -> dict:
                               "names": list(info.alt_action_names)},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
-
-
-# Episode-level columns appended to LeRobot's meta/episodes table (readable as ds.meta.episodes[i][...]).
-SOURCE_ROLE = "source"  # an instance's unscored, unperturbed source rollout (action-blind baseline, paired training data)
-
-EPISODE_COLUMNS = (
-    "wsp.episode_id", "wsp.instance_id", "wsp.suite", "wsp.platform", "wsp.task", "wsp.seed", "wsp.role",
-    "wsp.source", "wsp.intervention", "wsp.objects", "wsp.camera_intrinsic", "wsp.camera_extrinsic",
-    "wsp.success", "wsp.num_frames",
-)
 
 
 @dataclass(frozen=True)

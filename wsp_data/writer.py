@@ -20,9 +20,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from wsp_data.schema import (
-    EPISODE_ID, INSTANCES, MASK_KEY, PLATFORM_INFO, SOURCE_ROLE, PlatformInfo, frame_features,
-)
+from wsp_data.platforms import kit
+from wsp_data.schema import EPISODE_ID, INSTANCES, MASK_KEY, SOURCE_ROLE, PlatformInfo, frame_features
 from wsp_data.staging import RolloutArrays, SlotRecord
 
 REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
@@ -52,12 +51,12 @@ def write_config(config_dir: Path, config: str, platform: str,
     from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    info = PLATFORM_INFO[platform]
+    info = kit(platform).info
     tmp = config_dir.with_name(config_dir.name + ".writing")
     shutil.rmtree(tmp, ignore_errors=True)
     logging.getLogger("lerobot").setLevel(logging.WARNING)
     ds = LeRobotDataset.create(
-        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(platform), root=tmp,
+        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(info), root=tmp,
         robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
     )
     episode_rows: list[dict] = []

@@ -9,129 +9,18 @@ deterministic: the same release, name and generation seed give identical frames.
 from __future__ import annotations
 
 import functools
-import json
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pyarrow.parquet as pq
 
-from wsp_data.schema import INSTANCES
-from wsp_eval.reference import episodes, reference_frames, reference_masks
+from wsp_eval.episode import BaselineError, EpisodeContext, source_episode_index  # noqa: F401  (re-exported)
+from wsp_eval.generate import GenerateError, write_submission
+from wsp_eval.registry import Registry
 
 BLUR_SIGMA_PX = 2.0  # `blur`: standard deviation of the Gaussian kernel, pixels
 NOISE_SIGMA = 10.0  # `noise`: standard deviation of the additive Gaussian noise, grey levels (0–255 scale)
 LAG_SECONDS = 0.25  # `lag`: delay of the video (5 frames at 20 Hz)
-T1_PREFIX = "t1_"  # T1 configs: the unperturbed source rollout is the scored `original` role
-T1_SOURCE_ROLE = "original"  # role of the unperturbed rollout in a T1 instance
-T3_PREFIX = "t3_"  # T3 configs: the canonical execution is the expert member of the instance's group
-T3_SOURCE_GROUP = "expert"
-SOURCE_COLUMN = "source_episode_index"  # other suites: instance column of an extra, unscored source episode
-
-
-class BaselineError(RuntimeError):
-    """A baseline that cannot run on this release; the message names the config or episode."""
-
-
-@dataclass
-class EpisodeContext:
-    """One episode of a release as a baseline or model adapter sees it. The readers are lazy and cached
-    (read-only arrays); `dataclasses.replace(ctx, seed=k)` shares the cache across seeds."""
-
-    release: Path
-    config: str
-    row: dict  # the instance's row of instances.parquet
-    role: str
-    episode_index: int
-    fps: float
-    seed: int  # generation seed
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def config_dir(self) -> Path:
-        return Path(self.release) / self.config
-
-    @property
-    def episode_id(self) -> str:
-        return self.row["episode_ids"][self._position]
-
-    @property
-    def num_frames(self) -> int:
-        """The reference horizon of this episode."""
-        return int(self.row["num_frames"][self._position])
-
-    @property
-    def _position(self) -> int:
-        return list(self.row["episode_indices"]).index(self.episode_index)
-
-    def frames(self) -> np.ndarray:
-        """Reference RGB frames (N, H, W, 3) uint8."""
-        return self._cached("frames", lambda: reference_frames(self.config_dir, self.episode_index))
-
-    def masks(self) -> np.ndarray:
-        """Robot label masks (N, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers."""
-        return self._cached("masks", lambda: reference_masks(self.config_dir, self.episode_index))
-
-    def source_frames(self) -> np.ndarray:
-        """RGB frames of the instance's unperturbed source rollout (its own length)."""
-        index = source_episode_index(self.config, self.row, self.config_dir)
-        return self._cached("source", lambda: reference_frames(self.config_dir, index))
-
-    def actions(self, key: str = "action") -> np.ndarray:
-        """The episode's action stream `key` (`action`, or `action.ee` / `action.joint`), float32 (T, D)."""
-        return self._cached(f"actions/{key}", lambda: episode_actions(self.config_dir, self.episode_index, key))
-
-    def rng(self) -> np.random.Generator:
-        """A fresh generator seeded from (generation seed, episode index)."""
-        return np.random.default_rng([self.seed, self.episode_index])
-
-    def _cached(self, key: str, read: Callable[[], np.ndarray]) -> np.ndarray:
-        if key not in self._cache:
-            value = read()
-            value.flags.writeable = False
-            self._cache[key] = value
-        return self._cache[key]
-
-
-def episode_actions(config_dir: Path, episode_index: int, key: str = "action") -> np.ndarray:
-    """Column `key` of one episode's rows (index in [dataset_from_index, dataset_to_index)), float32 (T, D)."""
-    config_dir = Path(config_dir)
-    ep = episodes(config_dir)[episode_index]
-    info = json.loads((config_dir / "meta" / "info.json").read_text())
-    path = config_dir / info["data_path"].format(chunk_index=ep["data/chunk_index"], file_index=ep["data/file_index"])
-    names = pq.read_schema(path).names
-    if key not in names:
-        known = ", ".join(n for n in names if n.startswith("action"))
-        raise ValueError(f"{path}: no column {key!r}; action columns: {known}")
-    lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
-    t = pq.read_table(path, columns=["index", key], filters=[("index", ">=", lo), ("index", "<", hi)]).sort_by("index")
-    if t.num_rows != hi - lo:
-        raise ValueError(f"{path}: episode {episode_index} has {t.num_rows} rows, expected {hi - lo}")
-    return np.asarray(t.column(key).to_pylist(), dtype=np.float32).reshape(t.num_rows, -1)
-
-
-@functools.lru_cache(maxsize=8)
-def _t3_experts(config_dir: Path) -> dict[str, int]:
-    """T3: group_id → the episode index of the group's expert rollout."""
-    rows = pq.read_table(Path(config_dir) / INSTANCES, columns=["group_id", "source_group", "episode_indices"])
-    return {g: int(e[0]) for g, s, e in zip(*(rows.column(c).to_pylist() for c in rows.column_names))
-            if s == T3_SOURCE_GROUP}
-
-
-def source_episode_index(config: str, row: dict, config_dir: Path | None = None) -> int:
-    """The episode index of an instance's unperturbed source rollout: T1's `original` role; T3's canonical
-    execution, the expert of the same group (needs `config_dir`); else the instance column
-    `source_episode_index`."""
-    if config.startswith(T1_PREFIX):
-        return int(row["episode_indices"][list(row["roles"]).index(T1_SOURCE_ROLE)])
-    if config.startswith(T3_PREFIX) and config_dir is not None and row.get("group_id") in _t3_experts(config_dir):
-        return _t3_experts(Path(config_dir))[row["group_id"]]
-    index = row.get(SOURCE_COLUMN)
-    if index is None:
-        raise BaselineError(f"{config}: the release has no source rollouts (no {SOURCE_COLUMN!r} for instance "
-                            f"{row.get('instance_id')}); action_blind needs a build that stores them")
-    return int(index)
 
 
 # -- frame transforms ---------------------------------------------------------------------------------
@@ -246,11 +135,15 @@ def background_corrupt(ctx: EpisodeContext) -> np.ndarray:
     return corrupt(ctx.frames(), paired_regions(ctx.masks() > 0)[1], ctx.rng())
 
 
-BASELINES: dict[str, Baseline] = {
-    "oracle": _of_reference(oracle), "static": _of_reference(static), "action_blind": action_blind,
-    "blur": _of_reference(blur), "noise": noise, "lag": lag,
-    "robot_corrupt": robot_corrupt, "background_corrupt": background_corrupt,
-}
+BASELINES: Registry[Baseline] = Registry("baseline", "worldsimprobe.baselines")
+BASELINES.register("oracle", _of_reference(oracle))
+BASELINES.register("static", _of_reference(static))
+BASELINES.register("action_blind", action_blind)
+BASELINES.register("blur", _of_reference(blur))
+BASELINES.register("noise", noise)
+BASELINES.register("lag", lag)
+BASELINES.register("robot_corrupt", robot_corrupt)
+BASELINES.register("background_corrupt", background_corrupt)
 
 
 def write_baseline(name: str, release: Path, out: Path, seeds: tuple[int, ...] = (0, 1, 2),
@@ -258,12 +151,9 @@ def write_baseline(name: str, release: Path, out: Path, seeds: tuple[int, ...] =
     """Write (or resume) a complete submission of baseline `name` for every scored config, with model
     `baseline:<name>`; returns the number of videos written by this call. Raises KeyError for an unknown
     name, BaselineError for anything else that stops it."""
-    from wsp_eval.generate import GenerateError, write_submission  # generate imports this module
-
-    if name not in BASELINES:
-        raise KeyError(f"unknown baseline {name!r}; known: {', '.join(BASELINES)}")
+    baseline = BASELINES[name]
     try:
-        result = write_submission(BASELINES[name], release, out, seeds=seeds, name=f"baseline:{name}",
+        result = write_submission(baseline, release, out, seeds=seeds, name=f"baseline:{name}",
                                   progress=progress)
     except GenerateError as e:
         raise BaselineError(str(e)) from None

@@ -29,9 +29,8 @@ import numpy as np
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
-import wsp_data
-from wsp_data.schema import INSTANCES
-from wsp_eval.baselines import EpisodeContext
+from wsp_eval.episode import EpisodeContext
+from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES
 from wsp_eval.submission import SUBMISSION_JSON, VIDEO_NAME, test_configs
 from wsp_eval.video import write_video
 
@@ -203,7 +202,7 @@ def _previous_seconds(out: Path, name: str) -> float:
 
 
 def _write_manifest(out: Path, name: str, seeds: list[int], configs: list[str], seconds: float) -> None:
-    meta = {"model": name, "benchmark_version": wsp_data.BENCHMARK_VERSION, "seeds": seeds, "configs": configs,
+    meta = {"model": name, "benchmark_version": BENCHMARK_VERSION, "seeds": seeds, "configs": configs,
             "hardware": platform.processor() or platform.machine(), "generation_seconds": round(seconds, 3)}
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".{SUBMISSION_JSON}.partial"

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_data.schema import MASK_KEY
+from wsp_eval.release_format import MASK_KEY
 from wsp_eval.video import VideoError
 
 

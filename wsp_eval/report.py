@@ -19,7 +19,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-SUITES = ("t1", "t2", "t3", "t4", "t5")
+from wsp_eval.release_format import SCORED_SUITES as SUITES  # noqa: E402
+
 TITLES = {"t1": "Local action calibration", "t2": "Global trajectory coverage",
           "t3": "Action-source behaviour preservation", "t4": "Interaction grounding",
           "t5": "Interaction dynamics"}

@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_data.schema import INSTANCES
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
+from wsp_eval.release_format import INSTANCES, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
@@ -169,7 +169,6 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     """Score `submission` against `release`; write the reports under `out`; return the report dict."""
     from tqdm import tqdm
 
-    from wsp_data.release import load_release
     from wsp_eval.report import write_reports
 
     submission, release, out = Path(submission), Path(release), Path(out)

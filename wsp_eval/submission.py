@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_data.schema import INSTANCES, RELEASE_JSON
+from wsp_eval.release_format import INSTANCES, RELEASE_JSON
 from wsp_eval.video import MAX_FPS, MIN_FPS, VideoError, read_video
 
 SUBMISSION_JSON = "submission.json"

@@ -17,7 +17,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from wsp_data.schema import MAX_ATTEMPTS, PLATFORMS, SUITES
+from wsp_data.platforms import KITS
+from wsp_data.schema import MAX_ATTEMPTS, SUITES
 from wsp_data.staging import RolloutArrays
 
 
@@ -35,8 +36,8 @@ class BuildConfig:
     def __post_init__(self):
         if self.suite not in SUITES:
             raise ValueError(f"unknown suite {self.suite!r}; known: {', '.join(SUITES)}")
-        if self.platform not in PLATFORMS:
-            raise ValueError(f"unknown platform {self.platform!r}; known: {', '.join(PLATFORMS)}")
+        if self.platform not in KITS:
+            raise ValueError(f"unknown platform {self.platform!r}; known: {', '.join(KITS)}")
         if self.count <= 0:
             raise ValueError(f"--count must be a positive number of instances, got {self.count}")
         if not self.tasks:

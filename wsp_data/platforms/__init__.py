@@ -1,10 +1,11 @@
-"""Simulator platforms, found by name; this is the one place that registers them. Simulators are imported
-only inside this package and the source modules, and only when a platform is first used, so building on one
-platform never imports the other's simulator.
+"""Simulator platforms, found by name in `KITS`; this is the one place that registers the built-in ones, and
+other distributions add theirs as `PlatformKit` objects through the entry-point group `worldsimprobe.platforms`
+(`wsp_eval.registry`). Simulators are imported only inside this package and the source modules, and only when
+a platform is first used, so building on one platform never imports the other's simulator.
 
 A `PlatformKit` is what suite builders need from a platform: its benchmark tasks, a verified expert source
 per task, a rendering replayer, the joint stream the common validity checks read, and the action bounds
-its controller accepts.
+its controller accepts; and what the release stores about it (`info`).
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
+
+from wsp_data.schema import PLATFORM_INFO, PlatformInfo
+from wsp_eval.registry import Registry
 
 ARM = 7  # arm joints
 BLOCK_RAD = 0.15  # rad an arm joint may lag its target …
@@ -102,6 +106,7 @@ class PlatformKit:
     blocked: Callable[[np.ndarray, np.ndarray, np.ndarray], bool]  # (qpos, tcp_pose, native stream) → arm held back
     gripper_dim: int  # the gripper's index in the native action
     gripper_open: float  # its fully open command
+    info: PlatformInfo  # camera, action streams, simulator: what the release stores about the platform
 
     def tasks(self) -> dict:
         return self.load_tasks()
@@ -143,21 +148,21 @@ def _libero_renderer(task: str, objects: tuple[str, ...]):
     return LiberoPlatform(task, render=True, objects=objects)
 
 
-KITS: dict[str, PlatformKit] = {
-    "maniskill": PlatformKit("maniskill", 7, _maniskill_tasks, _maniskill_expert, _maniskill_renderer,
-                             joint_stream=lambda ro: ro.actions, action_bounds=None,
-                             arm_motion=lambda a: np.asarray(a, dtype=np.float64)[:, :ARM], blocked=joint_blocked,
-                             gripper_dim=7, gripper_open=1.0),
-    # LIBERO's native stream is OSC deltas; the joint stream beside it holds the joint positions reached
-    "libero": PlatformKit("libero", 6, _libero_tasks, _libero_expert, _libero_renderer,
-                          joint_stream=lambda ro: ro.alt_actions, action_bounds=(-1.0, 1.0),
-                          # the hand's commanded path (m): cumulative OSC position deltas
-                          arm_motion=lambda a: np.cumsum(np.asarray(a, dtype=np.float64)[:, :3] * OSC_POS_SCALE, axis=0),
-                          blocked=osc_blocked, gripper_dim=6, gripper_open=-1.0),
-}
+KITS: Registry[PlatformKit] = Registry("platform", "worldsimprobe.platforms")
+KITS.register("maniskill", PlatformKit(
+    "maniskill", 7, _maniskill_tasks, _maniskill_expert, _maniskill_renderer,
+    joint_stream=lambda ro: ro.actions, action_bounds=None,
+    arm_motion=lambda a: np.asarray(a, dtype=np.float64)[:, :ARM], blocked=joint_blocked,
+    gripper_dim=7, gripper_open=1.0, info=PLATFORM_INFO["maniskill"]))
+# LIBERO's native stream is OSC deltas; the joint stream beside it holds the joint positions reached
+KITS.register("libero", PlatformKit(
+    "libero", 6, _libero_tasks, _libero_expert, _libero_renderer,
+    joint_stream=lambda ro: ro.alt_actions, action_bounds=(-1.0, 1.0),
+    # the hand's commanded path (m): cumulative OSC position deltas
+    arm_motion=lambda a: np.cumsum(np.asarray(a, dtype=np.float64)[:, :3] * OSC_POS_SCALE, axis=0),
+    blocked=osc_blocked, gripper_dim=6, gripper_open=-1.0, info=PLATFORM_INFO["libero"]))
 
 
 def kit(platform: str) -> PlatformKit:
-    if platform not in KITS:
-        raise KeyError(f"unknown platform {platform!r}; known: {', '.join(KITS)}")
+    """The kit of `platform` (built-in or from an entry point); KeyError naming the known platforms."""
     return KITS[platform]

@@ -1,4 +1,6 @@
-"""Backends, found by name (SPEC §4): one registry per role, each with an offline CPU default.
+"""Backends, found by name (SPEC §4): one registry per role, each with an offline CPU default. A registry
+entry is a factory `(BackendSpec) -> backend`; other distributions add some through the entry-point groups
+`worldsimprobe.flow`, `worldsimprobe.tracker` and `worldsimprobe.judge` (`wsp_eval.registry`).
 
     flow      dis (default, OpenCV DIS)        dpflow (ptlflow, local checkpoint)
     tracker   lk (default, OpenCV LK + FB)     tapnext (tapnet, local checkpoint)
@@ -11,18 +13,28 @@ checkpoint or an endpoint is missing. Nothing downloads.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
 from wsp_eval.backends.errors import BackendUnavailable
+from wsp_eval.registry import Registry
+
+Factory = Callable[["BackendSpec"], Any]
+FLOW: Registry[Factory] = Registry("flow backend", "worldsimprobe.flow")
+TRACKER: Registry[Factory] = Registry("tracker backend", "worldsimprobe.tracker")
+JUDGE: Registry[Factory] = Registry("judge backend", "worldsimprobe.judge")
+REGISTRIES = {"flow": FLOW, "tracker": TRACKER, "judge": JUDGE}
 
 
+@JUDGE.register("rules")
 def _rules_judge(spec: BackendSpec):
     from wsp_eval.backends.judge_rules import RulesJudge
 
     return RulesJudge()
 
 
+@JUDGE.register("openai")
 def _openai_judge(spec: BackendSpec):
     from wsp_eval.backends.judge_openai import OpenAIJudge
 
@@ -34,34 +46,32 @@ def _openai_judge(spec: BackendSpec):
     return judge
 
 
+@FLOW.register("dis")
 def _dis(spec: BackendSpec):
     from wsp_eval.backends.flow import DISFlow
 
     return DISFlow()
 
 
+@FLOW.register("dpflow")
 def _dpflow(spec: BackendSpec):
     from wsp_eval.backends.flow import DPFlow
 
     return DPFlow(spec.flow_checkpoint)
 
 
+@TRACKER.register("lk")
 def _lk(spec: BackendSpec):
     from wsp_eval.backends.tracker import LKTracker
 
     return LKTracker()
 
 
+@TRACKER.register("tapnext")
 def _tapnext(spec: BackendSpec):
     from wsp_eval.backends.tracker import TAPNextTracker
 
     return TAPNextTracker(spec.tracker_checkpoint)
-
-
-FLOW = {"dis": _dis, "dpflow": _dpflow}
-TRACKER = {"lk": _lk, "tapnext": _tapnext}
-JUDGE = {"rules": _rules_judge, "openai": _openai_judge}
-REGISTRIES = {"flow": FLOW, "tracker": TRACKER, "judge": JUDGE}
 
 
 @dataclass(frozen=True)
@@ -79,7 +89,7 @@ class BackendSpec:
     def __post_init__(self):
         for role, registry in REGISTRIES.items():
             if getattr(self, role) not in registry:
-                raise BackendUnavailable(f"unknown {role} backend {getattr(self, role)!r}; known: {', '.join(registry)}")
+                raise BackendUnavailable(f"unknown {registry.kind} {getattr(self, role)!r}; known: {', '.join(registry)}")
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -1,4 +1,5 @@
-"""Suite scorers, found by name. One module per suite; this is the one place that registers them.
+"""Suite scorers, found by name. One module per suite; this is the one place that registers them. Suites are
+part of the benchmark's definition (seed ranges, release format), so `SCORERS` takes no entry points.
 
 Every suite module provides:
     SUITE, TITLE     its key ("t1") and title
@@ -15,6 +16,12 @@ from __future__ import annotations
 
 from types import ModuleType
 
+from wsp_eval.registry import Registry
 from wsp_eval.suites import t1, t2, t3, t4, t5
 
-SCORERS: dict[str, ModuleType] = {m.SUITE: m for m in (t1, t2, t3, t4, t5)}
+SCORERS: Registry[ModuleType] = Registry("suite scorer")
+SCORERS.register(t1.SUITE, t1)
+SCORERS.register(t2.SUITE, t2)
+SCORERS.register(t3.SUITE, t3)
+SCORERS.register(t4.SUITE, t4)
+SCORERS.register(t5.SUITE, t5)

@@ -1,0 +1,59 @@
+"""The release format both sides share: version, file names, path templates, suite keys, per-frame feature
+keys, episode columns, and reading `release.json`.
+
+The build side (`wsp_data`) writes releases with these names and the evaluation side reads them; it lives here
+so that scoring never imports the build side. Platform facts (camera, action names) are not here: a reader
+finds them in a config's `meta/info.json`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+BENCHMARK_VERSION = "0.1.0"
+CODEBASE_VERSION = "v3.0"  # LeRobot dataset format
+DEFAULT_RELEASE_NAME = "worldsimprobe"
+
+# -- files and paths ----------------------------------------------------------------------------------
+RELEASE_JSON = "release.json"
+CARD = "README.md"
+CROISSANT = "croissant.json"
+INSTANCES = "instances.parquet"
+BUILD_REPORT = "build_report.json"  # per config, beside instances.parquet
+STAGING_DIR = ".wsp-staging"  # per config, under the release; removed once the config is assembled
+CONFIG_NAME = "{suite}_{platform}"  # e.g. t1_maniskill
+EPISODE_ID = "episode_{index:06d}"  # submission path component: <config>/<episode_id>/seed<k>.mp4
+INSTANCE_ID = "{config}/{slot:06d}"
+
+SCORED_SUITES = ("t1", "t2", "t3", "t4", "t5")
+SUITES = (*SCORED_SUITES, "train")
+
+# -- frames and episodes --------------------------------------------------------------------------------
+FPS = 20
+IMAGE_SIZE = 128
+MAX_OBJECTS = 4  # object pose / contact columns per frame (unused slots are NaN / False)
+MASK_KEY = "observation.robot_mask"
+
+# Episode-level columns appended to LeRobot's meta/episodes table (readable as ds.meta.episodes[i][...]).
+SOURCE_ROLE = "source"  # an instance's unscored, unperturbed source rollout (action-blind baseline, paired training data)
+EPISODE_COLUMNS = (
+    "wsp.episode_id", "wsp.instance_id", "wsp.suite", "wsp.platform", "wsp.task", "wsp.seed", "wsp.role",
+    "wsp.source", "wsp.intervention", "wsp.objects", "wsp.camera_intrinsic", "wsp.camera_extrinsic",
+    "wsp.success", "wsp.num_frames",
+)
+
+
+class ReleaseError(RuntimeError):
+    """A folder that is not (or not yet) a readable WorldSimProbe release."""
+
+
+def load_release(root: Path) -> dict:
+    """The parsed `release.json` of `root`, or ReleaseError saying why there is none."""
+    path = Path(root) / RELEASE_JSON
+    if not path.exists():
+        raise ReleaseError(f"{root}: not a WorldSimProbe release (no {RELEASE_JSON})")
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ReleaseError(f"{path}: unreadable ({e})") from e
