@@ -14,13 +14,16 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from importlib.metadata import EntryPoint, entry_points
+from typing import Generic, TypeVar
+
+T = TypeVar("T")
 
 
 class PluginError(RuntimeError):
     """An entry point that cannot be used: it clashes with a registered name or fails to load."""
 
 
-class Registry[T]:
+class Registry(Generic[T]):  # Generic, not PEP 695 syntax: the evaluation side stays importable on Python < 3.12
     """Objects of one `kind` (a word for messages: "platform", "flow backend") found by name."""
 
     def __init__(self, kind: str, group: str | None = None) -> None:
