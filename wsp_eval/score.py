@@ -6,7 +6,8 @@
   is the mean over platforms.
 - CIs: `BOOTSTRAP` resamples of the instances (within groups for a balanced suite), percentile interval,
   fixed RNG seed; Overall and macro CIs combine the suites' resamples index by index.
-- A missing or unusable video (missing, unreadable, wrong frame count, absurd fps) is a *problem*. Without
+- A missing or unusable video (missing, unreadable, not a video, over the size cap, wrong frame count, absurd
+  fps, a resolution unlike its instance's other videos) is a *problem*, found per file in bounded memory. Without
   `allow_missing` a missing file stops scoring before it starts and a broken one stops it at the end (the
   finished instances are cached); with it, the seed of every affected instance scores 0 and the report
   counts and lists the problems.
@@ -32,6 +33,7 @@ from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.release_format import INSTANCES, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, load_video, test_configs, validate
+from wsp_eval.submission import check_sizes
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
@@ -80,6 +82,21 @@ def _load(path: Path, expected: Expected, rel: str) -> tuple[tuple[np.ndarray, f
     return video, ("; ".join(map(str, problems)) or None)
 
 
+def _load_seed(job: Job, seed: int) -> tuple[dict[str, tuple[np.ndarray, float]] | None, list[str]]:
+    """One seed's videos by role, decoded one at a time (bounded: `load_video`), and their problems; None when
+    one is missing or unusable or when they differ in resolution."""
+    videos, rels, problems = {}, {}, []
+    for role, episode_id, n in zip(job.row["roles"], job.row["episode_ids"], job.row["num_frames"]):
+        exp = Expected(job.config, episode_id, seed, n, job.row["fps"])
+        video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath)
+        if problem:
+            problems.append(problem)
+        else:
+            videos[role], rels[role] = video, exp.relpath
+    problems += map(str, check_sizes({rels[r]: v[0].shape[1:3] for r, v in videos.items()}))
+    return (None if problems else videos), problems
+
+
 def score_instance(job: Job, spec: BackendSpec) -> dict:
     """Score one instance over every seed: a JSON-ready record."""
     suite, platform = split_config(job.config)
@@ -89,15 +106,9 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
     prepared = module.prepare(ref, backends)
     seeds, problems = [], []
     for seed in job.seeds:
-        videos = {}
-        for role, episode_id, n in zip(job.row["roles"], job.row["episode_ids"], job.row["num_frames"]):
-            exp = Expected(job.config, episode_id, seed, n, job.row["fps"])
-            video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath)
-            if problem:
-                problems.append(problem)
-            else:
-                videos[role] = video
-        if len(videos) < len(job.row["roles"]):
+        videos, found = _load_seed(job, seed)
+        problems += found
+        if videos is None:
             seeds.append({"seed": seed, "score": 0.0, "missing": True})
             continue
         score, detail = module.score_seed(prepared, videos, backends)
@@ -130,7 +141,8 @@ def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list
 
 
 def _open_cache(out: Path, key: dict) -> dict[tuple[str, str], dict]:
-    """Cached records of an earlier run with the same key (a partial last line is ignored)."""
+    """Cached records of an earlier run with the same key; the cache is rewritten without a partial last line
+    (a killed run's), so that the records appended next start on a line of their own."""
     key_path, cache = out / CACHE_KEY, out / CACHE
     cache.parent.mkdir(parents=True, exist_ok=True)
     if not key_path.is_file() or json.loads(key_path.read_text()) != key:
@@ -144,6 +156,7 @@ def _open_cache(out: Path, key: dict) -> dict[tuple[str, str], dict]:
         except json.JSONDecodeError:
             continue
         done[(r["config"], r["instance_id"])] = r
+    cache.write_text("".join(json.dumps(r) + "\n" for r in done.values()))
     return done
 
 

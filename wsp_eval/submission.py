@@ -4,15 +4,19 @@
     <submission>/<config>/<episode_id>/seed<k>.mp4
 
 `validate` lists every problem at once, each naming the file: missing or extra files, unreadable or
-truncated videos, zero frames, a frame count other than the reference horizon, constant videos, fps
-missing or absurd, links (a submission holds plain files only; a link pointing outside it is named as
-such), and a benchmark version that does not match the release. It never raises on bad input.
+truncated videos, zero frames, a frame count other than the reference horizon, a side over `MAX_SIDE`,
+videos of one instance at different resolutions, constant videos, fps missing or absurd, links (a
+submission holds plain files only; a link pointing outside it is named as such), a submission.json over
+`MAX_MANIFEST_BYTES` or malformed, and a benchmark version that does not match the release. It never raises
+on bad input, and decoding is bounded (`wsp_eval.video.read_video`): one video at a time, refused from its
+header or stopped at the first frame past the horizon, so memory stays bounded whatever is uploaded.
 """
 
 from __future__ import annotations
 
 import json
 import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +30,7 @@ SUBMISSION_JSON = "submission.json"
 VIDEO_NAME = "seed{seed}.mp4"
 REQUIRED_KEYS = {"model": str, "benchmark_version": str, "seeds": list}
 TRAIN_PREFIX = "train_"
+MAX_MANIFEST_BYTES = 1 << 20  # submission.json holds a few short fields; a larger one is refused unread
 
 
 @dataclass(frozen=True)
@@ -46,6 +51,7 @@ class Expected:
     seed: int
     num_frames: int
     fps: float
+    instance_id: str = ""
 
     @property
     def relpath(self) -> str:
@@ -61,10 +67,11 @@ def test_configs(release: Path) -> list[str]:
 def expected_videos(release: Path, configs: list[str], seeds: list[int]) -> list[Expected]:
     out = []
     for config in configs:
-        table = pq.read_table(Path(release) / config / INSTANCES, columns=["episode_ids", "num_frames", "fps"])
-        for ids, frames, fps in zip(*(table.column(c).to_pylist() for c in ("episode_ids", "num_frames", "fps"))):
+        columns = ["instance_id", "episode_ids", "num_frames", "fps"]
+        table = pq.read_table(Path(release) / config / INSTANCES, columns=columns)
+        for instance, ids, frames, fps in zip(*(table.column(c).to_pylist() for c in columns)):
             for episode_id, n in zip(ids, frames):
-                out.extend(Expected(config, episode_id, s, n, fps) for s in seeds)
+                out.extend(Expected(config, episode_id, s, n, fps, instance) for s in seeds)
     return out
 
 
@@ -72,16 +79,22 @@ def _read_manifest(sub: Path, release_version: str, release_configs: list[str]) 
     path = sub / SUBMISSION_JSON
     if not path.is_file():
         return None, [Problem(SUBMISSION_JSON, "missing")]
+    if path.stat().st_size > MAX_MANIFEST_BYTES:
+        return None, [Problem(SUBMISSION_JSON, f"{path.stat().st_size / 1e6:.1f} MB; at most "
+                                               f"{MAX_MANIFEST_BYTES // 1024} KiB is read (it holds model, "
+                                               "benchmark_version, seeds and a few optional fields)")]
     try:
         meta = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         return None, [Problem(SUBMISSION_JSON, f"not valid JSON ({e})")]
+    except RecursionError:
+        return None, [Problem(SUBMISSION_JSON, "not valid JSON (nested too deep)")]
     if not isinstance(meta, dict):
         return None, [Problem(SUBMISSION_JSON, "must be a JSON object")]
     problems = [Problem(SUBMISSION_JSON, f"'{k}' missing or not a {t.__name__}")
                 for k, t in REQUIRED_KEYS.items() if not isinstance(meta.get(k), t)]
     seeds = meta.get("seeds")
-    if isinstance(seeds, list) and (not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds)
+    if isinstance(seeds, list) and (not seeds or not all(type(s) is int and s >= 0 for s in seeds)
                                     or len(set(seeds)) != len(seeds)):
         problems.append(Problem(SUBMISSION_JSON, "'seeds' must be a non-empty list of distinct non-negative integers"))
     version = meta.get("benchmark_version")
@@ -98,6 +111,11 @@ def _read_manifest(sub: Path, release_version: str, release_configs: list[str]) 
     return (meta if not problems else None), problems
 
 
+def _shown(path: Path, sub: Path) -> str:
+    """`path` relative to the submission, printable whatever bytes its name holds (undecodable ones as \\xNN)."""
+    return str(path.relative_to(sub)).encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+
+
 def _links(sub: Path) -> list[Problem]:
     problems = []
     root = sub.resolve()
@@ -105,24 +123,21 @@ def _links(sub: Path) -> list[Problem]:
         if p.is_symlink():
             target = p.resolve()
             where = "outside the submission" if root not in target.parents and target != root else "inside it"
-            problems.append(Problem(str(p.relative_to(sub)), f"is a link ({where}: {target}); submit plain files"))
+            problems.append(Problem(_shown(p, sub), f"is a link ({where}: {target}); submit plain files"))
     return problems
 
 
 def load_video(path: Path, exp: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, list[Problem]]:
-    """Decode a submitted video once: (frames, fps) when it meets the contract, and its problems."""
+    """Decode a submitted video once, bounded by the reference horizon and `MAX_SIDE` (`read_video`): (frames,
+    fps) when it meets the contract, and its problems."""
     if path.stat().st_size == 0:
         return None, [Problem(rel, "empty file (zero frames)")]
     try:
-        frames, fps = read_video(path)
+        frames, fps = read_video(path, max_frames=exp.num_frames)
     except VideoError as e:
-        return None, [Problem(rel, str(e).split(": ", 1)[-1])]
+        return None, [Problem(rel, str(e).removeprefix(f"{path}: "))]
     problems = check_frames(frames, fps, exp, rel)
     return (None if problems else (frames, fps)), problems
-
-
-def check_video(path: Path, exp: Expected, rel: str) -> list[Problem]:
-    return load_video(path, exp, rel)[1]
 
 
 def check_frames(frames: np.ndarray, fps: float, exp: Expected, rel: str) -> list[Problem]:
@@ -138,6 +153,28 @@ def check_frames(frames: np.ndarray, fps: float, exp: Expected, rel: str) -> lis
     return problems
 
 
+def check_sizes(sizes: dict[str, tuple[int, int]]) -> list[Problem]:
+    """The videos of one instance and seed (relpath → (H, W)) share one resolution, as T1 compares them pixel by
+    pixel: those unlike the most common one are named."""
+    if not sizes:
+        return []
+    common = Counter(sizes.values()).most_common(1)[0][0]
+    return [Problem(rel, f"{w}×{h} pixels, unlike the {common[1]}×{common[0]} of the other videos of its instance; "
+                         "export every video of an instance at one resolution")
+            for rel, (h, w) in sizes.items() if (h, w) != common]
+
+
+def _check_videos(sub: Path, todo: list[Expected]) -> list[Problem]:
+    """Each video's problems (decoded one at a time), then one resolution per instance and seed."""
+    problems, sizes = [], {}
+    for exp in todo:
+        video, found = load_video(sub / exp.relpath, exp, exp.relpath)
+        problems += found
+        if video is not None:
+            sizes.setdefault((exp.config, exp.instance_id, exp.seed), {})[exp.relpath] = video[0].shape[1:3]
+    return problems + [p for group in sizes.values() for p in check_sizes(group)]
+
+
 def validate(submission: Path, release: Path, *, check_videos: bool = True) -> list[Problem]:
     """Every problem of a submission against a release (empty list: valid)."""
     sub = Path(submission)
@@ -150,7 +187,7 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
     if meta is None:
         return problems
     expected = {e.relpath: e for e in expected_videos(release, meta.get("configs", release_configs), meta["seeds"])}
-    present = {str(p.relative_to(sub)) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
+    present = {_shown(p, sub) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
     present.discard(SUBMISSION_JSON)
     for rel in sorted(set(expected) - present):
         problems.append(Problem(rel, "missing"))
@@ -159,6 +196,5 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
             "unexpected video (no such episode or seed in the release)"
         problems.append(Problem(rel, why))
     if check_videos:
-        for rel in sorted(set(expected) & present):
-            problems += check_video(sub / rel, expected[rel], rel)
+        problems += _check_videos(sub, [expected[rel] for rel in sorted(set(expected) & present)])
     return problems

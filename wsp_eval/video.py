@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+
 import numpy as np
 
 
@@ -43,25 +46,82 @@ class VideoError(ValueError):
 
 
 MIN_FPS, MAX_FPS = 1.0, 240.0  # a submission's fps outside this range is treated as absurd
+REEXPORT = "re-export it as an h264 mp4 (`wsp_eval.video.write_video` writes the accepted encoding)"
+MAX_SIDE = 512
+"""The largest width or height of a submitted video. The largest reference camera is 320×240 (RoboTwin;
+ManiSkill and LIBERO render 128×128, SPEC §1), T2/T3 compare flows at 160×120 and T4 tracks in 256², so more
+pixels score nothing; 512 admits the usual generation sizes (256², 512²) and bounds a decoded frame to
+768 KiB, so a video of a reference's horizon (a few hundred frames) stays a few hundred MB at most, where one
+1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
 
 
-def read_video(path) -> tuple[np.ndarray, float]:
-    """Decode every frame of a video file as RGB uint8 (N, H, W, 3) and return it with its fps."""
+def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE) -> tuple[np.ndarray, float]:
+    """Decode a video file as RGB uint8 (N, H, W, 3) and return it with its fps, in bounded memory: with
+    `max_frames` (the reference horizon) the file size and the stream header's frame count are checked before
+    decoding and decoding stops at the first frame past it (a header can lie: frames are counted); the header's
+    resolution and every decoded frame's are checked against `max_side`. A VideoError names the file, what was
+    found, what is allowed and the fix."""
     import av
 
+    if max_frames is not None:
+        _check_size(path, max_frames, max_side)
     try:
         with av.open(str(path)) as container:
             if not container.streams.video:
-                raise VideoError(f"{path}: no video stream")
+                raise VideoError(f"{path}: no video stream; {REEXPORT}")
             stream = container.streams.video[0]
+            _check_header(path, stream, max_frames, max_side)
             rate = stream.average_rate or stream.guessed_rate
-            frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
+            frames = _decode(path, container.decode(stream), max_frames, max_side)
     except VideoError:
         raise
     except (av.error.FFmpegError, OSError, ValueError) as e:
-        raise VideoError(f"{path}: unreadable video ({type(e).__name__}: {e})") from e
+        raise VideoError(f"{path}: unreadable video ({type(e).__name__}: {e}); {REEXPORT}") from e
     fps = float(rate) if rate else float("nan")
     return (np.stack(frames) if frames else np.zeros((0, 0, 0, 3), np.uint8)), fps
+
+
+def _too_many(path, found: str, max_frames: int) -> VideoError:
+    return VideoError(f"{path}: {found}; the reference horizon is {max_frames}: export exactly {max_frames} "
+                      "frames (frame j at j/fps)")
+
+
+def _check_size(path, max_frames: int, max_side: int) -> None:
+    """Refuse a file larger than twice `max_frames` raw RGB frames at the cap (+1 MiB), more than even lossless
+    h264 of noise takes, unopened: it cannot be a valid video and its index alone would cost memory."""
+    limit = max_frames * 2 * max_side * max_side * 3 + (1 << 20)
+    size = os.path.getsize(path)
+    if size > limit:
+        raise VideoError(f"{path}: {size / 1e6:.1f} MB, more than {max_frames} frames of at most {max_side}×"
+                         f"{max_side} take even lossless ({limit / 1e6:.1f} MB); export exactly {max_frames} "
+                         "frames at the reference's resolution")
+
+
+def _check_side(path, width: int, height: int, max_side: int) -> None:
+    if max(width, height) > max_side:
+        raise VideoError(f"{path}: {width}×{height} pixels; at most {max_side} per side is accepted (references "
+                         "are at most 320×240): export at the reference's resolution (the first frame's size)")
+
+
+def _check_header(path, stream, max_frames: int | None, max_side: int) -> None:
+    """Refuse from the header alone, before any frame is decoded (0 means the header does not say)."""
+    _check_side(path, stream.codec_context.width, stream.codec_context.height, max_side)
+    if max_frames is not None and stream.frames > max_frames:
+        raise _too_many(path, f"{stream.frames} frames (stream header)", max_frames)
+
+
+def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int) -> list[np.ndarray]:
+    """Frames one by one, each checked before it is converted; stop at the first frame past `max_frames`."""
+    frames: list[np.ndarray] = []
+    for frame in decoded:
+        if max_frames is not None and len(frames) == max_frames:
+            raise _too_many(path, f"more than {max_frames} frames (decoding stopped there)", max_frames)
+        _check_side(path, frame.width, frame.height, max_side)
+        if frames and frames[0].shape[:2] != (frame.height, frame.width):
+            raise VideoError(f"{path}: the resolution changes mid-video ({frames[0].shape[1]}×{frames[0].shape[0]} "
+                             f"then {frame.width}×{frame.height}); export every frame at one resolution")
+        frames.append(frame.to_ndarray(format="rgb24"))
+    return frames
 
 
 def write_video(path, frames: np.ndarray, fps: float) -> None:
