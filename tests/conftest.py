@@ -1,35 +1,57 @@
-"""Shared fixtures: one tiny real T1 build (ManiSkill, rendered, LeRobot-written) reused by the tests.
+"""Shared fixtures: the tiny real releases (ManiSkill and LIBERO, rendered, LeRobot-written) that the tests
+share, each built once per run for every module and every xdist worker (`tiny_releases.py`).
 
 Hugging Face caches go to a temp folder and every hub access is offline (DESIGN: nothing downloads).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
+from tiny_releases import offline_environment
 
-_HF = tempfile.mkdtemp(prefix="wsp-hf-")
-os.environ.update(HF_HOME=_HF, HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1", TQDM_DISABLE="1")
+offline_environment()
 
 import json  # noqa: E402
+import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
-TINY = dict(suite="t1", platform="maniskill", count=4, tasks=("PickCube", "PushCube"), seed=0, max_attempts=8)
+from tiny_releases import LIBERO_SUITES, LIBERO_TASKS, T2_TASKS, TINY, build_config, shared_release  # noqa: E402,F401
+
 TINY_ARGS = {k: v for k, v in TINY.items() if k != "platform"}
 
 
 def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], out: Path | None = None,
                platform: str = "maniskill", **config) -> Path:
-    """Build one config of a tiny real release into `out` (default: a fresh folder named `worldsimprobe`)."""
-    from wsp_data.build import build
-    from wsp_data.builders import BuildConfig
-
+    """Build one config of a tiny real release into `out` (default: a fresh folder named `worldsimprobe`), for
+    tests that need a build of their own."""
     out = out or tmp_path_factory.mktemp(suite) / "worldsimprobe"
-    result = build(BuildConfig(suite, platform, count, tuple(tasks), **config), out, progress=False)
-    assert result.assembled
-    return out
+    return build_config(out, suite, platform, count, tasks, **config)
+
+
+SHARED = ("t1_release", "suites_release", "libero_release")  # in the order the pre-build step finishes them
+
+
+def pytest_collection_modifyitems(items) -> None:
+    """Test files that need no shared release run first, then those needing t1, suites, LIBERO, so xdist
+    workers seldom wait for a release still being built. Files stay whole and keep their own order."""
+    def need(item) -> int:
+        return max((SHARED.index(f) + 1 for f in item.fixturenames if f in SHARED), default=0)
+
+    per_file: dict = {}
+    for item in items:
+        per_file[item.path] = max(per_file.get(item.path, 0), need(item))
+    items.sort(key=lambda item: per_file[item.path])
+
+
+@pytest.fixture(scope="session")
+def shared_root(tmp_path_factory) -> Path:
+    """Where the shared tiny releases live: the pre-built folder `scripts/test.sh` names, else this run's temp
+    folder common to all xdist workers."""
+    if os.environ.get("WSP_TEST_RELEASES"):
+        return Path(os.environ["WSP_TEST_RELEASES"])
+    base = tmp_path_factory.getbasetemp()
+    return (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "shared-releases"
 
 
 def instance_rows(release: Path, config: str):
@@ -60,38 +82,23 @@ def assert_source_episodes(ds, rows) -> None:
 
 
 @pytest.fixture(scope="session")
-def t1_release(tmp_path_factory) -> Path:
+def t1_release(shared_root) -> Path:
     """A real 4-instance T1 release folder named `worldsimprobe`."""
-    out = build_tiny(tmp_path_factory, **TINY_ARGS)
+    out = shared_release("t1", shared_root)
     assert json.loads((out / "t1_maniskill" / "build_report.json").read_text())["kept"] >= 3
     return out
 
 
-T2_TASKS = ("PickCube", "PushCube", "PullCube")
-
-
 @pytest.fixture(scope="session")
-def suites_release(tmp_path_factory) -> Path:
+def suites_release(shared_root) -> Path:
     """One real release holding tiny T2 (3 replays over T2_TASKS), T3 (8, PickCube: one group of all eight
     sources), T4 (6, PickCube: two of each kind) and T5 (8, PickCube: one per primitive) configs."""
-    out = tmp_path_factory.mktemp("suites") / "worldsimprobe"
-    for suite, count, tasks in (("t2", 3, T2_TASKS), ("t3", 8, ("PickCube",)), ("t4", 6, ("PickCube",)),
-                                ("t5", 8, ("PickCube",))):
-        build_tiny(tmp_path_factory, suite, count, tasks, out=out)
-    return out
-
-
-LIBERO_TASKS = ("libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
-                "libero_object/pick_up_the_butter_and_place_it_in_the_basket")
-LIBERO_SUITES = (("t1", 2), ("t2", 2), ("t3", 8), ("t4", 3), ("t5", 4), ("train", 2))
+    return shared_release("suites", shared_root)
 
 
 @pytest.fixture(scope="session")
-def libero_release(tmp_path_factory) -> Path:
+def libero_release(shared_root) -> Path:
     """One real LIBERO release over LIBERO_TASKS (a tall can, a flat box: push and tap need the low one):
     T1 (2 triplets), T2 (2 cross-task replays), T3 (one group of all eight sources, on the first task), T4 (one
     per kind), T5 (one per primitive), train (2)."""
-    out = tmp_path_factory.mktemp("libero") / "worldsimprobe"
-    for suite, count in LIBERO_SUITES:
-        build_tiny(tmp_path_factory, suite, count, LIBERO_TASKS, out=out, platform="libero")
-    return out
+    return shared_release("libero", shared_root)

@@ -1,0 +1,115 @@
+"""The test suite's shared tiny releases: each is built once per test run and shared by every test module and
+every pytest-xdist worker.
+
+`shared_release(name, root)` builds release `name` into `root/<name>/worldsimprobe` under a file lock, or
+returns it at once when another process has built it (a fixture asking for a release still being built waits
+for it). `scripts/test.sh` starts `python tests/tiny_releases.py ROOT` beside pytest, so the releases are built
+while the tests that need none run (both cores stay busy), and hands ROOT to the fixtures through
+`WSP_TEST_RELEASES`; a run without it (one test file, say) builds what it needs on first use, in the run's
+temp folder shared by its xdist workers.
+
+Rule of the repo: a new test uses these releases (or adds a config to one of them) unless it needs a build of
+its own; a build of its own is for tests of building itself (sharding, resume, bad arguments).
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing as mp
+import os
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from filelock import FileLock
+
+RELEASE_DIR = "worldsimprobe"  # the folder name users load by (`load_dataset("worldsimprobe", ...)`)
+DONE = ".built"  # marker beside the release: present once every config is assembled
+
+TINY = dict(suite="t1", platform="maniskill", count=4, tasks=("PickCube", "PushCube"), seed=0, max_attempts=8)
+T2_TASKS = ("PickCube", "PushCube", "PullCube")
+LIBERO_TASKS = ("libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
+                "libero_object/pick_up_the_butter_and_place_it_in_the_basket")
+LIBERO_SUITES = (("t1", 2), ("t2", 2), ("t3", 8), ("t4", 3), ("t5", 4), ("train", 2))
+
+# name → the configs built into it, in order: (suite, platform, count, tasks, extra BuildConfig fields)
+RELEASES: dict[str, tuple[tuple[str, str, int, tuple[str, ...], dict], ...]] = {
+    # 4 T1 triplets over two tasks
+    "t1": ((TINY["suite"], TINY["platform"], TINY["count"], TINY["tasks"],
+            {"seed": TINY["seed"], "max_attempts": TINY["max_attempts"]}),),
+    # T2 (3 replays over T2_TASKS), T3 (8, PickCube: one group of all eight sources), T4 (6, PickCube: two of
+    # each kind) and T5 (8, PickCube: one per primitive)
+    "suites": (("t2", "maniskill", 3, T2_TASKS, {}), ("t3", "maniskill", 8, ("PickCube",), {}),
+               ("t4", "maniskill", 6, ("PickCube",), {}), ("t5", "maniskill", 8, ("PickCube",), {})),
+    # LIBERO over a tall can and a flat box (push and tap need the low one): T1 (2 triplets), T2 (2 cross-task
+    # replays), T3 (one group of all eight sources, on the first task), T4 (one per kind), T5 (one per
+    # primitive), train (2)
+    "libero": tuple((suite, "libero", count, LIBERO_TASKS, {}) for suite, count in LIBERO_SUITES),
+}
+
+
+def build_config(out: Path, suite: str, platform: str, count: int, tasks: tuple[str, ...], **config) -> Path:
+    """Build one config of a tiny real release into the release folder `out`."""
+    from wsp_data.build import build
+    from wsp_data.builders import BuildConfig
+
+    result = build(BuildConfig(suite, platform, count, tuple(tasks), **config), out, progress=False)
+    assert result.assembled, f"{suite}_{platform} did not assemble"
+    return out
+
+
+def shared_release(name: str, root: Path) -> Path:
+    """Release `name` under `root`, built by whichever process asks first; the others wait for it."""
+    if name not in RELEASES:
+        raise KeyError(f"no shared tiny release {name!r}; known: {', '.join(RELEASES)}")
+    folder = root / name
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / RELEASE_DIR
+    with FileLock(str(folder / ".lock")):
+        if not (folder / DONE).exists():
+            for suite, platform, count, tasks, extra in RELEASES[name]:
+                build_config(out, suite, platform, count, tasks, **extra)
+            (folder / DONE).touch()
+    return out
+
+
+def offline_environment() -> None:
+    """What every test process gets: Hugging Face caches in a temp folder, every hub access offline (nothing
+    downloads), no progress bars."""
+    os.environ.update(HF_HOME=tempfile.mkdtemp(prefix="wsp-hf-"), HF_HUB_OFFLINE="1", HF_DATASETS_OFFLINE="1",
+                      TQDM_DISABLE="1")
+
+
+PREBUILD_ORDER = ("libero", "t1", "suites")  # the longest build first; t1 then suites, in the order tests use them
+
+
+def _timed(name: str, root: Path) -> tuple[str, float]:
+    start = time.perf_counter()
+    shared_release(name, root)
+    return name, time.perf_counter() - start
+
+
+def main(argv: list[str] | None = None) -> int:
+    offline_environment()
+    p = argparse.ArgumentParser(description="Build the test suite's shared tiny releases into ROOT.")
+    p.add_argument("root", type=Path)
+    p.add_argument("--workers", type=int, default=2, help="releases built at once (default 2)")
+    p.add_argument("names", nargs="*", default=list(PREBUILD_ORDER), help=f"default: {' '.join(PREBUILD_ORDER)}")
+    args = p.parse_args(argv)
+    unknown = set(args.names) - set(RELEASES)
+    if unknown:
+        p.error(f"unknown release(s) {', '.join(sorted(unknown))}; known: {', '.join(RELEASES)}")
+    start = time.perf_counter()
+    print(f"[tiny releases] building {', '.join(args.names)} into {args.root}, {args.workers} at a time", flush=True)
+    with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
+        for job in as_completed([pool.submit(_timed, n, args.root) for n in args.names]):
+            name, seconds = job.result()
+            print(f"[tiny releases] {name}: {seconds:.0f} s", flush=True)
+    print(f"[tiny releases] done in {time.perf_counter() - start:.0f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
