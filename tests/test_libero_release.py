@@ -74,7 +74,7 @@ def test_t1_triplets_satisfy_the_acceptance_rule(libero_release):
 
 
 def test_t2_replays_are_valid_cross_task_streams(libero_release):
-    from wsp_data.sources.libero_experts import LiberoExpertSource
+    from wsp_data.platforms.libero.experts import LiberoExpertSource
 
     ds = open_lerobot(libero_release, "t2_libero")
     for r in instance_rows(libero_release, "t2_libero"):

@@ -56,7 +56,7 @@ def episodes(release, rows):
 
 @pytest.fixture(scope="module")
 def experts():
-    from wsp_data.sources.experts import ExpertSource
+    from wsp_data.platforms.maniskill.experts import ExpertSource
 
     sources = {t: ExpertSource(t) for t in TASKS}
     yield sources

@@ -1,8 +1,8 @@
 """T3 Action-source behaviour preservation (SPEC §3 T3) on ManiSkill and LIBERO.
 
 Slots come in groups of eight that share task, episode and scene seed, one per source: the scripted expert,
-five scripted operator models H1–H5 (`wsp_data/sources/operators.py`), and an early and a late behaviour-
-cloning policy checkpoint (`wsp_data/sources/policies.py`). Slot k belongs to group g = k // 8, gets source
+five scripted operator models H1–H5 (`wsp_data/platforms/maniskill/operators.py`), and an early and a late behaviour-
+cloning policy checkpoint (`wsp_data/platforms/maniskill/policies.py`). Slot k belongs to group g = k // 8, gets source
 `SOURCE_GROUPS[k % 8]` and task `tasks[g % len(tasks)]`.
 
 The group's scene seed is the first candidate `scene_seed("t3", 8·g, a)` (a = 0, 1, …) on which the expert
@@ -13,7 +13,7 @@ worker), so all eight land on the same seed; slot k's attempt a uses candidate a
 stream. Columns: `source_group`, `source_kind` (scripted_expert / scripted_operator / bc_policy / human_teleop),
 `source_provenance` (JSON: operator parameters, or checkpoint, training steps and measured success),
 `group_id` (task and seed), `source_success`, `steps`.
-On LIBERO the operators and policies are `wsp_data/sources/libero_t3.py` (same groups, same interfaces).
+On LIBERO the operators and policies are `wsp_data/platforms/libero/t3.py` (same groups, same interfaces).
 """
 
 from __future__ import annotations
@@ -34,12 +34,12 @@ T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
 def t3_tasks(platform: str) -> tuple[str, ...]:
     """The tasks with operator models and trained policies on `platform`."""
     if platform == "libero":
-        from wsp_data.sources.libero_t3 import T3_TASKS as LIBERO_T3_TASKS
+        from wsp_data.platforms.libero.t3 import T3_TASKS as LIBERO_T3_TASKS
 
         return LIBERO_T3_TASKS
     return T3_TASKS
-OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # `wsp_data.sources.operators.OPERATORS` (tested)
-POLICY_GROUPS = ("policy_early", "policy_late")  # `wsp_data.sources.policies.STAGES` (tested)
+OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # `wsp_data.platforms.maniskill.operators.OPERATORS` (tested)
+POLICY_GROUPS = ("policy_early", "policy_late")  # `wsp_data.platforms.maniskill.policies.STAGES` (tested)
 SOURCE_GROUPS = ("expert", *OPERATOR_GROUPS, *POLICY_GROUPS)
 GROUP_SIZE = len(SOURCE_GROUPS)
 
@@ -56,16 +56,16 @@ class _Rig(TaskRig):
         if group not in self._sources:
             stage = group.removeprefix("policy_")
             if self.platform == "libero":
-                from wsp_data.sources.libero_t3 import LiberoOperatorSource, LiberoPolicySource
+                from wsp_data.platforms.libero.t3 import LiberoOperatorSource, LiberoPolicySource
 
                 self._sources[group] = (LiberoOperatorSource(self.task, group) if group in OPERATOR_GROUPS
                                         else LiberoPolicySource(self.task, stage))
             elif group in OPERATOR_GROUPS:
-                from wsp_data.sources.operators import OperatorSource
+                from wsp_data.platforms.maniskill.operators import OperatorSource
 
                 self._sources[group] = OperatorSource(self.task, group)
             else:
-                from wsp_data.sources.policies import PolicySource
+                from wsp_data.platforms.maniskill.policies import PolicySource
 
                 self._sources[group] = PolicySource(self.task, stage)
         return self._sources[group]

@@ -140,8 +140,8 @@ class _TaskRig:
     palette), and the three kinds' proposals."""
 
     def __init__(self, task: str):
-        from wsp_data.platforms.maniskill import ExtraActor, ManiSkillPlatform
-        from wsp_data.sources.experts import ExpertSource
+        from wsp_data.platforms.maniskill.env import ExtraActor, ManiSkillPlatform
+        from wsp_data.platforms.maniskill.experts import ExpertSource
 
         self.palette = tuple(ExtraActor(f"distractor_{i}", shape, (h, h, h), color)
                              for i, (shape, h, color) in enumerate(PALETTE_SPECS))
@@ -352,8 +352,8 @@ class T4Builder(SuiteBuilder):
             # every LIBERO task grasps its target and has scene objects to spare; but open fingers brush a tall
             # target that nearly fills them (measured: the alphabet soup can, 8 of 8 false-contact proposals
             # touched it), so false contact takes the tasks with a low target, as T5's push and tap do
-            from wsp_data.sources.libero_experts import task_spec
-            from wsp_data.sources.libero_primitives import low_target
+            from wsp_data.platforms.libero.experts import task_spec
+            from wsp_data.platforms.libero.primitives import low_target
 
             tasks = tuple(dict.fromkeys(config.tasks))
             low = tuple(t for t in tasks if low_target(task_spec(t)))

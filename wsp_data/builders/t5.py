@@ -3,7 +3,7 @@
 Proposal: a replay-verified successful expert trajectory of the slot's task; its branch step is
 `BACKOFF` steps before first contact (the first frame where a robot link touches the task's target, or the
 target has moved 2 mm, whichever comes first: contacts shorter than a physics substep can go unflagged). The
-expert's script is re-run up to that step and the slot's primitive (`wsp_data.sources.primitives`) replaces
+expert's script is re-run up to that step and the slot's primitive (`wsp_data.platforms.maniskill.primitives`) replaces
 the rest. Knock-over and tap act on a prop added beside the target by a scene hook (a tall box, a ball); their
 source must succeed with the prop resting there untouched.
 Validation, unrendered first: common validity (SPEC §5), no other object shifted by more than 1 cm, and the
@@ -50,9 +50,9 @@ class _Rig:
     rendered `pd_joint_pos` replays, all built with the same scene extras."""
 
     def __init__(self, task: str, prop):
-        from wsp_data.platforms.maniskill import ManiSkillPlatform
-        from wsp_data.sources.experts import task_spec
-        from wsp_data.sources.primitives import BranchScript
+        from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+        from wsp_data.platforms.maniskill.experts import task_spec
+        from wsp_data.platforms.maniskill.primitives import BranchScript
 
         self.kit = kit("maniskill")
         self.spec = task_spec(task)
@@ -113,8 +113,8 @@ class T5Builder(SuiteBuilder):
         super().__init__(config)
         self.primitives = PLATFORM_PRIMITIVES[config.platform]
         if config.platform == "libero":
-            from wsp_data.sources.libero_experts import task_spec
-            from wsp_data.sources.libero_primitives import compatible
+            from wsp_data.platforms.libero.experts import task_spec
+            from wsp_data.platforms.libero.primitives import compatible
 
             self.primitive_tasks = {p: tuple(t for t in config.tasks if compatible(p, task_spec(t)))
                                     for p in self.primitives}
@@ -144,7 +144,7 @@ class T5Builder(SuiteBuilder):
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
         if self.config.platform == "libero":
             return self._attempt_libero(plan, seed)
-        from wsp_data.sources.primitives import PROPS, SCRIPTS, prop_placement
+        from wsp_data.platforms.maniskill.primitives import PROPS, SCRIPTS, prop_placement
 
         primitive, prop = plan.group, PROPS.get(plan.group)
         rig = self.rig(plan.task, prop)
@@ -187,7 +187,7 @@ class T5Builder(SuiteBuilder):
         return self._validate(plan, rig, seed, source, stream, placements, branch, contact, evaluated, simulated)
 
     def _attempt_libero(self, plan: SlotPlan, seed: int) -> Kept | Dropped:
-        from wsp_data.sources.libero_primitives import branch_stream
+        from wsp_data.platforms.libero.primitives import branch_stream
 
         rig, primitive = self.rig(plan.task, None), plan.group
         source = rig.expert.trajectory(seed)  # scripted and verified in this scene

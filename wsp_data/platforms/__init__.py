@@ -113,37 +113,37 @@ class PlatformKit:
 
 
 def _maniskill_tasks() -> dict:
-    from wsp_data.sources.experts import TASKS
+    from wsp_data.platforms.maniskill.experts import TASKS
 
     return TASKS
 
 
 def _maniskill_expert(task: str):
-    from wsp_data.sources.experts import ExpertSource
+    from wsp_data.platforms.maniskill.experts import ExpertSource
 
     return ExpertSource(task)
 
 
 def _maniskill_renderer(task: str, objects: tuple[str, ...]):
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 
     return ManiSkillPlatform(task, render=True, objects=objects)
 
 
 def _libero_tasks() -> dict:
-    from wsp_data.sources.libero_experts import TASKS
+    from wsp_data.platforms.libero.experts import TASKS
 
     return TASKS
 
 
 def _libero_expert(task: str):
-    from wsp_data.sources.libero_experts import LiberoExpertSource
+    from wsp_data.platforms.libero.experts import LiberoExpertSource
 
     return LiberoExpertSource(task)
 
 
 def _libero_renderer(task: str, objects: tuple[str, ...]):
-    from wsp_data.platforms.libero import LiberoPlatform
+    from wsp_data.platforms.libero.env import LiberoPlatform
 
     return LiberoPlatform(task, render=True, objects=objects)
 

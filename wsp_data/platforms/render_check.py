@@ -7,14 +7,14 @@ import sys
 
 
 def main() -> int:
-    from wsp_data.platforms.runtime import LAVAPIPE_ICD, configure_cpu_rendering
+    from wsp_data.platforms.maniskill.runtime import LAVAPIPE_ICD, configure_cpu_rendering
 
     configure_cpu_rendering()
     if not LAVAPIPE_ICD.exists():
         print(f"render check: {LAVAPIPE_ICD} missing; install mesa-vulkan-drivers 25 (scripts/setup.sh)", file=sys.stderr)
         return 1
     try:
-        from wsp_data.platforms.maniskill import ManiSkillPlatform
+        from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 
         with ManiSkillPlatform("PickCube") as p:
             frame = p.reset(seed=0).rgb
@@ -24,8 +24,8 @@ def main() -> int:
     if not _good("SAPIEN", frame):
         return 1
     try:
-        from wsp_data.platforms.libero import LiberoPlatform
-        from wsp_data.sources.libero_experts import TASKS
+        from wsp_data.platforms.libero.env import LiberoPlatform
+        from wsp_data.platforms.libero.experts import TASKS
 
         with LiberoPlatform(next(iter(TASKS))) as p:
             frame = p.reset(seed=0).rgb
