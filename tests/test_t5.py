@@ -143,7 +143,8 @@ def test_bad_inputs_are_named():
 # -- builder planning ------------------------------------------------------------------------------------
 def test_plan_balances_primitives_exactly():
     from wsp_data.builders import BuildConfig
-    from wsp_data.builders.t5 import PRIMITIVE_TASKS, T5Builder
+    from wsp_data.builders.t5 import T5Builder
+    from wsp_data.platforms.maniskill.t5 import PRIMITIVE_TASKS
     from wsp_data.platforms.maniskill.experts import TASKS
 
     b = T5Builder(BuildConfig("t5", "maniskill", 32, tuple(TASKS)))
