@@ -50,7 +50,8 @@ class _Rig(TaskRig):
     def stream(self, group: str, seed: int) -> tuple[np.ndarray | None, dict]:
         """The group's action stream on `seed` and its provenance (stream None: the source produced none)."""
         if group == "expert":
-            return self.expert.trajectory(seed), {"kind": "scripted_expert", "script": self.kit.expert_script(self.task)}
+            provenance = {"kind": "scripted_expert", "script": self.kit.expert_script(self.task)}
+            return self.expert.trajectory(seed), provenance
         src = self.source(group)
         if group in OPERATOR_GROUPS:
             actions = src.attempt(seed).actions  # failures are kept: the caller replays and records success

@@ -53,7 +53,6 @@ MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object 
 REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
 
 
-
 @dataclass
 class Proposal:
     """What to replay: actions, placements after reset, the recorded objects and the evaluated one."""

@@ -56,7 +56,7 @@ class LiberoKit(PlatformKit):
         return LiberoPlatform(task, render=True, objects=objects)
 
     def joint_stream(self, rollout: Rollout) -> np.ndarray:
-        return rollout.alt_actions  # the native stream is OSC deltas; the joint stream beside it holds the joint positions reached
+        return rollout.alt_actions  # the native stream is OSC deltas; beside it: the joint positions reached
 
     def arm_motion(self, actions: np.ndarray) -> np.ndarray:
         # the hand's commanded path (m): cumulative OSC position deltas
