@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_data.platforms.maniskill import ManiSkillPlatform
-from wsp_data.sources.experts import TASKS, ExpertSource
+from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+from wsp_data.platforms.maniskill.experts import TASKS, ExpertSource
 from wsp_data.staging import RolloutArrays, SlotRecord
 from wsp_data.writer import write_config
 

@@ -8,7 +8,7 @@ seeds are skipped and recorded), replay each to record its states, re-run the cl
 `--noisy-rollouts` times per seed with Gaussian noise (σ `--noise-std` = 0.1 OSC units) added to the executed arm
 actions while each visited state is labelled with the script's own clean action (DART-style recovery data:
 plain cloning of 30 demonstrations solved 0/10 held-out scenes on the can task), train the MLP of
-`wsp_data.sources.libero_t3` on (state features → the expert's OSC action) with `policies.fit` (the ManiSkill
+`wsp_data.platforms.libero.t3` on (state features → the expert's OSC action) with `policies.fit` (the ManiSkill
 recipe: AdamW, cosine decay, batch 256, one thread, seed 0), keep the weights after `--early-steps` (early) and
 `--steps` (late), measure closed-loop success of both on `--eval-seeds` held-out training seeds (910,000 + k),
 and write `<task>_<stage>.pt` (task's "/" as "__") and `training_config.json` into `--out`. The same arguments
@@ -28,12 +28,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from wsp_data.sources.libero_experts import LiberoExpertSource, PickPlaceScript  # noqa: E402
-from wsp_data.sources.libero_t3 import (  # noqa: E402
+from wsp_data.platforms.libero.experts import LiberoExpertSource, PickPlaceScript  # noqa: E402
+from wsp_data.platforms.libero.t3 import (  # noqa: E402
     CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, LiberoPolicySource, checkpoint_path,
     feature_names, features,
 )
-from wsp_data.sources.policies import fit, save_checkpoint, sha256, start_training, training_log  # noqa: E402
+from wsp_data.platforms.maniskill.policies import fit, save_checkpoint, sha256, start_training, training_log  # noqa: E402
 
 EVAL_SEED_BASE = 910_000
 

@@ -8,7 +8,7 @@ Per task:
    script fails is skipped and recorded) and replay each under `pd_joint_pos`, recording the state;
 2. re-execute each demonstration `--noisy-rollouts` times with temporally correlated noise on the arm targets
    and label every visited state with the demonstration's nominal action (DART-style recovery data);
-3. train an MLP from state features to the action (`wsp_data.sources.policies`), keeping the weights after
+3. train an MLP from state features to the action (`wsp_data.platforms.maniskill.policies`), keeping the weights after
    `--early-steps` (early) and after `--steps` (late);
 4. measure closed-loop success of both on `--eval-seeds` held-out training seeds (910,000 + k) and write
    `<task>_<stage>.pt` and `training_config.json` into `--out`.
@@ -29,13 +29,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from wsp_data.platforms.maniskill import Observation  # noqa: E402  (sets the rendering env vars first)
-from wsp_data.sources.experts import ExpertSource  # noqa: E402
-from wsp_data.sources.policies import (  # noqa: E402
+from wsp_data.platforms.maniskill.env import Observation  # noqa: E402  (sets the rendering env vars first)
+from wsp_data.platforms.maniskill.experts import ExpertSource  # noqa: E402
+from wsp_data.platforms.maniskill.policies import (  # noqa: E402
     CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, PolicySource, action_target, feature_names,
     features, read_goal, save_checkpoint, sha256, start_training, training_log,
 )
-from wsp_data.sources.policies import fit as train  # noqa: E402
+from wsp_data.platforms.maniskill.policies import fit as train  # noqa: E402
 
 # Held-out evaluation seeds: training range (< 1,000,000), disjoint from demonstration seeds and from the seeds
 # 900,000–900,009 on which the recipe (noise injection, step counts) was chosen.
@@ -105,8 +105,8 @@ def collect_noisy(task: str, d: dict, rollouts: int, sigma: float, rho: float, c
     if path is not None and path.is_file():
         log(f"{task}: noisy rollouts from cache {path}")
         return dict(np.load(path, allow_pickle=False))
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
-    from wsp_data.sources.experts import task_spec
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.experts import task_spec
 
     rows = {k: [] for k in ("qpos", "tcp", "objects", "goal", "step", "action", "episode")}
     t0 = time.perf_counter()
@@ -201,7 +201,7 @@ def main(argv=None) -> int:
     cache = args.cache if str(args.cache) not in ("", ".") else None
     log, out = training_log, args.out
     config, config_path = start_training(out)
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 
     with ManiSkillPlatform("PickCube", render=False) as p:  # the Panda's joint limits (same robot in every task)
         arm_limits = p.robot.get_qlimits()[0, :7].detach().cpu().numpy().astype(float).tolist()

@@ -13,8 +13,8 @@ import pytest
 
 from conftest import LIBERO_TASKS
 
-from wsp_data.platforms.libero import JOINT_ACTION_DIM, MASK_DISTAL, LiberoPlatform, PlatformError
-from wsp_data.sources.libero_experts import TASKS, LiberoExpertSource, task_spec
+from wsp_data.platforms.libero.env import JOINT_ACTION_DIM, MASK_DISTAL, LiberoPlatform, PlatformError
+from wsp_data.platforms.libero.experts import TASKS, LiberoExpertSource, task_spec
 
 TASK = LIBERO_TASKS[0]
 
@@ -151,7 +151,7 @@ def test_first_import_is_non_interactive(tmp_path):
     the network (offline), and must find the scene assets."""
     env = {**os.environ, "HOME": str(tmp_path), "HF_HUB_OFFLINE": "1", "TMPDIR": str(tmp_path)}
     env.pop("LIBERO_CONFIG_PATH", None)
-    code = ("from wsp_data.platforms.libero import LiberoPlatform;"
+    code = ("from wsp_data.platforms.libero.env import LiberoPlatform;"
             f"p = LiberoPlatform({TASK!r}); print('frame', p.reset(0).rgb.mean() > 0)")
     out = subprocess.run([sys.executable, "-c", code], env=env, stdin=subprocess.DEVNULL, capture_output=True,
                          text=True, timeout=300)

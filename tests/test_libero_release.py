@@ -14,9 +14,10 @@ from conftest import LIBERO_SUITES, LIBERO_TASKS, assert_source_episodes, build_
 from wsp_data.builders.t1 import MAGNITUDES, WINDOW
 from wsp_data.builders.t2 import object_flung
 from wsp_data.builders.t4 import KINDS, static
-from wsp_data.builders.t5_rules import PLATFORM_PRIMITIVES, check
+from wsp_data.builders.t5_rules import check
 from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms import osc_blocked
+from wsp_data.platforms import kit
+from wsp_data.platforms.libero.kit import osc_blocked
 from wsp_data.schema import CARD, PLATFORM_INFO, SOURCE_ROLE
 
 VIDEO = PLATFORM_INFO["libero"].video_key  # observation.images.agentview
@@ -74,7 +75,7 @@ def test_t1_triplets_satisfy_the_acceptance_rule(libero_release):
 
 
 def test_t2_replays_are_valid_cross_task_streams(libero_release):
-    from wsp_data.sources.libero_experts import LiberoExpertSource
+    from wsp_data.platforms.libero.experts import LiberoExpertSource
 
     ds = open_lerobot(libero_release, "t2_libero")
     for r in instance_rows(libero_release, "t2_libero"):
@@ -138,7 +139,7 @@ def test_t4_evaluated_object_never_moves_nor_is_touched(libero_release):
 def test_t5_stored_states_pass_their_primitive_rule(libero_release):
     ds = open_lerobot(libero_release, "t5_libero")
     rows = instance_rows(libero_release, "t5_libero")
-    assert sorted(rows["primitive"]) == sorted(PLATFORM_PRIMITIVES["libero"])
+    assert sorted(rows["primitive"]) == sorted(kit("libero").t5_primitives())
     assert_source_episodes(ds, rows)
     for r in rows:
         ep = episode(ds, r["episode_indices"][0])
@@ -146,7 +147,7 @@ def test_t5_stored_states_pass_their_primitive_rule(libero_release):
                                                                                   ep["meta"]["dataset_to_index"])])
         k = r["evaluated_index"]
         assert valid(ep) is None
-        ok, measured = check(r["primitive"], ep["objects"][:, k], contacts[:, k], r["robot_base_xy"], "libero")
+        ok, measured = check(r["primitive"], ep["objects"][:, k], contacts[:, k], r["robot_base_xy"], **kit("libero").t5_rule_thresholds())
         assert ok and measured["xy_displacement"] == pytest.approx(r["xy_displacement"], abs=1e-6)
         source = episode(ds, r["source_episode_index"])  # the branch: the expert's stream up to branch_step
         b = r["branch_step"]

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from wsp_data.platforms.maniskill import MASK_DISTAL, ManiSkillPlatform, PlatformError
-from wsp_data.sources.experts import ExpertSource, task_spec
+from wsp_data.platforms.maniskill.env import MASK_DISTAL, ManiSkillPlatform, PlatformError
+from wsp_data.platforms.maniskill.experts import ExpertSource, task_spec
 
 SEED = 7
 

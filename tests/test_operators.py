@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from wsp_data.platforms.maniskill import ManiSkillPlatform
-from wsp_data.sources.experts import ExpertSource
-from wsp_data.sources.operators import (
+from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+from wsp_data.platforms.maniskill.experts import ExpertSource
+from wsp_data.platforms.maniskill.operators import (
     OPERATORS, T3_TASKS, OperatorSource, OperatorStyle, stream_metrics,
 )
 

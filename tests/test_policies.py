@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from wsp_data.sources.policies import (
+from wsp_data.platforms.maniskill.policies import (
     CHECKPOINT_DIR, STAGES, T3_TASKS, TRAINING_CONFIG, PolicyCheckpointMissing, PolicySource, checkpoint_path,
     feature_names,
 )
@@ -47,8 +47,8 @@ def test_missing_checkpoint_names_path_and_script(tmp_path):
 
 
 def test_policy_stream_is_deterministic_and_replays_to_its_states():
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
-    from wsp_data.sources.experts import task_spec
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.experts import task_spec
 
     task, seed = "PickCube", 950_000  # a training-range seed no checkpoint was trained or evaluated on
     late, early = PolicySource(task, "late"), PolicySource(task, "early")

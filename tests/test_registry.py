@@ -100,9 +100,10 @@ def test_a_third_party_platform_is_a_kit(tmp_path):
     """End to end, in a fresh interpreter: a distribution's `worldsimprobe.platforms` entry point is a platform
     `kit()` returns and `wsp build --platform` accepts."""
     install_plugin(tmp_path, "[worldsimprobe.platforms]\ntoy = wsp_test_plugin:KIT\n", module="""
-        from dataclasses import replace
         from wsp_data.platforms import kit
-        KIT = replace(kit("maniskill"), name="toy")
+        class Toy(type(kit("maniskill"))):
+            name = "toy"
+        KIT = Toy()
     """)
     script = ("from wsp_data.platforms import KITS, kit; from wsp_data.builders import BuildConfig; "
               "from wsp_data.cli import parser; "

@@ -105,8 +105,8 @@ def test_stored_perturbation_is_exactly_the_intervention(lerobot_ds, rows):
 
 def test_stored_actions_replay_to_stored_states(lerobot_ds, rows):
     """The joint stream in the dataset reproduces the stored robot and object states in the simulator."""
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
-    from wsp_data.sources.experts import task_spec
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.experts import task_spec
 
     r = rows[1]
     idx = r["episode_indices"][2]

@@ -15,6 +15,7 @@ from wsp_data.builders.t2 import (
     BLOCK_STEPS, MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
     time_normalised,
 )
+from wsp_data.platforms import kit
 from wsp_data.schema import FPS, MASK_KEY, MAX_OBJECTS, SEED_BASE, VIDEO_KEY
 
 
@@ -56,7 +57,7 @@ def episodes(release, rows):
 
 @pytest.fixture(scope="module")
 def experts():
-    from wsp_data.sources.experts import ExpertSource
+    from wsp_data.platforms.maniskill.experts import ExpertSource
 
     sources = {t: ExpertSource(t) for t in TASKS}
     yield sources
@@ -128,12 +129,12 @@ def test_time_normalisation_and_mismatch_worked_examples():
     ramp = np.zeros((11, 8), dtype=np.float32)
     ramp[:, :7] = np.linspace(0, 1, 11)[:, None] * np.arange(1, 8)  # joint j goes 0 → j + 1
     ramp[:, 7] = 5.0  # the gripper is ignored
-    out = time_normalised(ramp, 5)
+    out = time_normalised(ramp, kit("maniskill"), 5)
     assert np.allclose(out, np.linspace(0, 1, 5)[:, None] * np.arange(1, 8))
-    assert motion_mismatch(ramp, out) == pytest.approx(0.0, abs=1e-12)
-    assert motion_mismatch(ramp, out + 0.1) == pytest.approx(0.1)
+    assert motion_mismatch(ramp, out, kit("maniskill")) == pytest.approx(0.0, abs=1e-12)
+    assert motion_mismatch(ramp, out + 0.1, kit("maniskill")) == pytest.approx(0.1)
     with pytest.raises(ValueError):
-        time_normalised(ramp[:1])
+        time_normalised(ramp[:1], kit("maniskill"))
 
 
 def test_collision_checks_on_hand_built_states():

@@ -27,8 +27,8 @@ def ds(suites_release):
 
 
 def test_source_groups_match_the_sources():
-    from wsp_data.sources.operators import OPERATORS
-    from wsp_data.sources.policies import STAGES
+    from wsp_data.platforms.maniskill.operators import OPERATORS
+    from wsp_data.platforms.maniskill.policies import STAGES
 
     assert OPERATOR_GROUPS == tuple(OPERATORS) and POLICY_GROUPS == tuple(f"policy_{s}" for s in STAGES)
     assert len(SOURCE_GROUPS) == 8
@@ -66,7 +66,7 @@ def test_sources_really_differ(rows):
 
 
 def test_every_stored_stream_replays_to_its_stored_states(rows, ds):
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 
     with ManiSkillPlatform("PickCube", render=False, objects=tuple(rows[0]["objects"])) as sim:
         for r in rows:

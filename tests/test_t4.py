@@ -162,7 +162,8 @@ def test_stored_reference_scores_100_without_the_simulator(rows, ds):
 
 def test_plan_balances_kinds_over_eligible_tasks():
     from wsp_data.builders import BuildConfig
-    from wsp_data.builders.t4 import KIND_TASKS, T4Builder
+    from wsp_data.builders.t4 import T4Builder
+    from wsp_data.platforms.maniskill.t4 import KIND_TASKS
 
     tasks = ("PickCube", "PushCube", "StackCube")
     b = T4Builder(BuildConfig(suite="t4", platform="maniskill", count=36, tasks=tasks))

@@ -13,7 +13,7 @@ import pytest
 from conftest import assert_source_episodes, instance_rows, open_lerobot
 
 from wsp_data.builders.t5_rules import PRIMITIVES, check, measure, passes, reversals, tilt, yaw_track
-from wsp_data.sources.primitives import PROPS
+from wsp_data.platforms.maniskill.primitives import PROPS
 
 BASE = (-0.615, 0.0)
 T = 41
@@ -143,8 +143,9 @@ def test_bad_inputs_are_named():
 # -- builder planning ------------------------------------------------------------------------------------
 def test_plan_balances_primitives_exactly():
     from wsp_data.builders import BuildConfig
-    from wsp_data.builders.t5 import PRIMITIVE_TASKS, T5Builder
-    from wsp_data.sources.experts import TASKS
+    from wsp_data.builders.t5 import T5Builder
+    from wsp_data.platforms.maniskill.t5 import PRIMITIVE_TASKS
+    from wsp_data.platforms.maniskill.experts import TASKS
 
     b = T5Builder(BuildConfig("t5", "maniskill", 32, tuple(TASKS)))
     plans = [b.plan(k) for k in range(32)]
@@ -277,7 +278,7 @@ def test_load_dataset_from_the_release_folder(release, rows):
 def test_stored_stream_replays_to_stored_states(rows, frames):
     """A prop instance's stored joint stream, replayed with its prop and placement, reproduces the stored
     object states exactly (how a user re-simulates a T5 reference)."""
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 
     r = next(r for r in rows if r["primitive"] == "tap")
     ep = frames[r["episode_indices"][0]]

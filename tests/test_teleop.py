@@ -57,7 +57,7 @@ def driver():
 
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
-    from wsp_data.sources.teleop import TeleopServer
+    from wsp_data.platforms.maniskill.teleop import TeleopServer
 
     srv = TeleopServer(TASK, SEED, tmp_path_factory.mktemp("teleop"), operator="H1", port=0)
     thread = threading.Thread(target=srv.serve_forever, daemon=True)
@@ -91,8 +91,8 @@ def test_browser_records_a_replay_verified_trajectory(driver, server):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.common.keys import Keys
 
-    from wsp_data.platforms.maniskill import ManiSkillPlatform
-    from wsp_data.sources.teleop import load_trajectory
+    from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+    from wsp_data.platforms.maniskill.teleop import load_trajectory
 
     driver.get(server.url)
     _wait(lambda: driver.execute_script("return document.body.dataset.ready === '1'"), what="page init")

@@ -292,7 +292,7 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_teleop(args) -> int:
-    from wsp_data.sources import teleop
+    from wsp_data.platforms.maniskill import teleop
 
     return teleop.run(args)
 

@@ -17,7 +17,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from wsp_data.platforms import KITS
+from wsp_data.platforms import KITS, kit
 from wsp_data.schema import MAX_ATTEMPTS, SUITES
 from wsp_data.staging import RolloutArrays
 
@@ -101,7 +101,9 @@ class SlotPlan:
 
 
 class SuiteBuilder(ABC):
-    """One suite on one platform.
+    """One suite on one platform. Everything simulator-specific comes from the platform's kit (`self.kit`, a
+    `wsp_data.platforms.interface.PlatformKit`); a builder never names a platform. A platform that cannot serve
+    the suite says why (`PlatformKit.unsupported`) and the builder refuses the config before simulating.
 
     Roles:
         `roles`: the scored rollouts of one instance, in order (e.g. original, small, large). A suite may
@@ -117,12 +119,11 @@ class SuiteBuilder(ABC):
     title: ClassVar[str]
     description: ClassVar[str]
     roles: ClassVar[tuple[str, ...]]
-    platforms: ClassVar[frozenset[str]] = frozenset({"maniskill"})  # platforms this builder is written for
 
     def __init__(self, config: BuildConfig):
-        if config.platform not in self.platforms:
-            raise ValueError(f"{self.suite} has no {config.platform} builder yet; it builds for "
-                             f"{', '.join(sorted(self.platforms))}")
+        self.kit = kit(config.platform)
+        if (why := self.kit.unsupported(self.suite)) is not None:
+            raise ValueError(f"{self.suite} cannot be built on platform {config.platform!r}: {why}")
         self.config = config
 
     def plan(self, slot: int) -> SlotPlan:

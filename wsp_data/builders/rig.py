@@ -20,7 +20,7 @@ def rollout_problem(k: PlatformKit, qlimits: np.ndarray, ro) -> str | None:
 class TaskRig:
     """The simulator resources of one task in one worker: expert source, unrendered and rendered replays."""
 
-    def __init__(self, task: str, platform: str = "maniskill"):
+    def __init__(self, task: str, platform: str):
         self.kit = kit(platform)
         self.expert = self.kit.make_expert(task)
         self.spec = self.expert.spec

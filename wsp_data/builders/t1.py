@@ -32,7 +32,6 @@ class T1Builder(SuiteBuilder):
                    "references succeed and 0 < D0s < D0l on the simulator's own frames; columns `d_os`, `d_ol` "
                    "and `r_star` hold the reference-side MSEs and ratio. Score: response-ratio calibration.")
     roles = ("original", "small", "large")
-    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)

@@ -9,7 +9,7 @@ Validation: the whole stream is executed from the receiver's reset state without
 kept only if RMFA can score it: at least one window with active robot pixels (`wsp_eval.flow`).
 Stored per instance: donor task and seed, the receiver–donor motion mismatch (`motion_mismatch`) and the
 number of scorable windows. Definitions and measurements: docs/t2.md; on LIBERO (OSC delta streams: every
-donor is compatible, arm motion = the commanded hand path, `platforms.osc_blocked`): docs/libero.md.
+donor is compatible, arm motion = the commanded hand path, the LIBERO kit's `blocked`): docs/libero.md.
 """
 
 from __future__ import annotations
@@ -33,24 +33,24 @@ FLUNG_SPEED = 1.0  # m/s: horizontal speed of a task object that counts as flung
 
 
 # -- motion mismatch -------------------------------------------------------------------------------------
-def time_normalised(actions: np.ndarray, points: int = MISMATCH_POINTS, platform: str = "maniskill") -> np.ndarray:
-    """The arm motion of a native stream (ManiSkill: the 7 joint targets, rad; LIBERO: the hand's commanded
-    path, the cumulative OSC position deltas, m), linearly resampled at `points` evenly spaced instants of
-    normalised time [0, 1] (first and last action kept): (points, k)."""
-    arm = kit(platform).arm_motion(actions)
+def time_normalised(actions: np.ndarray, k: PlatformKit, points: int = MISMATCH_POINTS) -> np.ndarray:
+    """The arm motion of a native stream (`k.arm_motion`: ManiSkill: the 7 joint targets, rad; LIBERO: the
+    hand's commanded path, the cumulative OSC position deltas, m), linearly resampled at `points` evenly spaced
+    instants of normalised time [0, 1] (first and last action kept): (points, k)."""
+    arm = k.arm_motion(actions)
     if len(arm) < 2:
         raise ValueError("a stream needs at least two actions to be time-normalised")
     src, dst = np.linspace(0.0, 1.0, len(arm)), np.linspace(0.0, 1.0, points)
     return np.stack([np.interp(dst, src, arm[:, j]) for j in range(arm.shape[1])], axis=1)
 
 
-def typical_arm_stream(source, count: int = TYPICAL_TRAJECTORIES, platform: str = "maniskill") -> np.ndarray:
+def typical_arm_stream(source, k: PlatformKit, count: int = TYPICAL_TRAJECTORIES) -> np.ndarray:
     """Mean of the time-normalised arm motions of a task's first `count` verified expert trajectories on
     training seeds SEED_BASE["train"], +1, … (never test seeds): (MISMATCH_POINTS, k)."""
     streams = []
     for seed in range(SEED_BASE["train"], SEED_BASE["train"] + TYPICAL_MAX_SEEDS):
         if (a := source.trajectory(seed)) is not None:
-            streams.append(time_normalised(a, platform=platform))
+            streams.append(time_normalised(a, k))
             if len(streams) == count:
                 return np.mean(streams, axis=0)
     raise RuntimeError(f"{source.spec.name}: only {len(streams)} of the {count} expert trajectories needed for "
@@ -58,17 +58,17 @@ def typical_arm_stream(source, count: int = TYPICAL_TRAJECTORIES, platform: str 
                        f"{SEED_BASE['train'] + TYPICAL_MAX_SEEDS - 1}")
 
 
-def motion_mismatch(donor_actions: np.ndarray, typical: np.ndarray, platform: str = "maniskill") -> float:
+def motion_mismatch(donor_actions: np.ndarray, typical: np.ndarray, k: PlatformKit) -> float:
     """RMS over time-normalised samples and arm-motion dimensions of donor − receiver's typical (ManiSkill: rad
     over the 7 joints; LIBERO: m over the hand path's x, y, z)."""
-    return float(np.sqrt(np.mean((time_normalised(donor_actions, len(typical), platform) - typical) ** 2)))
+    return float(np.sqrt(np.mean((time_normalised(donor_actions, k, len(typical)) - typical) ** 2)))
 
 
 # -- validity ----------------------------------------------------------------------------------------------
 def arm_blocked(qpos: np.ndarray, actions: np.ndarray) -> bool:
     """Joint-target streams: the arm is held back by something it collides with (table, a fixed fixture, a
     pinned object): some arm joint lags its target by more than BLOCK_RAD (0.15 rad) for BLOCK_STEPS (10)
-    consecutive steps. `qpos` (T+1, 9). LIBERO's OSC streams use `platforms.osc_blocked`."""
+    consecutive steps. `qpos` (T+1, 9). Other streams use their kit's `blocked` (LIBERO's OSC: `osc_blocked`)."""
     return joint_blocked(qpos, None, actions)
 
 
@@ -82,13 +82,17 @@ def object_flung(object_poses: np.ndarray) -> bool:
 
 def replay_problem(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarray, actions: np.ndarray,
                    qlimits: np.ndarray) -> str | None:
-    """None for a valid ManiSkill donor replay, else the drop reason: a common check (`check_rollout`),
-    `arm_blocked` or `object_flung` (unintended collisions)."""
+    """None for a valid donor replay of a joint-target stream (no action bounds), else the drop reason: a common
+    check (`check_rollout`), `arm_blocked` or `object_flung` (unintended collisions)."""
     from wsp_data.builders.validity import check_rollout
 
     if (why := check_rollout(qpos, tcp_pose, object_poses, actions, qlimits)) is not None:
         return why
-    return collision_problem(kit("maniskill"), qpos, tcp_pose, object_poses, actions)
+    if arm_blocked(qpos, actions):
+        return "arm_blocked"
+    if object_flung(object_poses):
+        return "object_flung"
+    return None
 
 
 def collision_problem(k: PlatformKit, qpos, tcp_pose, object_poses, actions) -> str | None:
@@ -111,7 +115,7 @@ class _TaskRig:
         self.spec = self.expert.spec
         self.state = self.expert.replayer
         self.qlimits = self.state.qlimits
-        self.typical = typical_arm_stream(self.expert, platform=platform)
+        self.typical = typical_arm_stream(self.expert, self.kit)
         self._render = None
 
     @property
@@ -142,7 +146,6 @@ class T2Builder(SuiteBuilder):
                    "task's typical one: rad of joint targets on ManiSkill, m of commanded hand path on LIBERO; cut "
                    "into deciles at scoring) and `active_windows`. Score: RMFA.")
     roles = ("reference",)
-    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
@@ -191,7 +194,7 @@ class T2Builder(SuiteBuilder):
         row = {
             "task": plan.task, "seed": seed, "instruction": receiver.spec.instruction,
             "objects": list(receiver.spec.objects), "source": f"scripted_expert (donor: {donor_task})",
-            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical, self.config.platform),
+            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical, self.kit),
             "active_windows": int((active > 0).sum()), "num_windows": len(active),
             "interventions": {"reference": {"donor_task": donor_task, "donor_seed": donor_seed}},
         }

@@ -1,8 +1,8 @@
-"""T3 Action-source behaviour preservation (SPEC §3 T3) on ManiSkill and LIBERO.
+"""T3 Action-source behaviour preservation (SPEC §3 T3).
 
 Slots come in groups of eight that share task, episode and scene seed, one per source: the scripted expert,
-five scripted operator models H1–H5 (`wsp_data/sources/operators.py`), and an early and a late behaviour-
-cloning policy checkpoint (`wsp_data/sources/policies.py`). Slot k belongs to group g = k // 8, gets source
+five scripted operator models H1–H5, and an early and a late behaviour-
+cloning policy checkpoint (the platform's `PlatformKit.t3_source`). Slot k belongs to group g = k // 8, gets source
 `SOURCE_GROUPS[k % 8]` and task `tasks[g % len(tasks)]`.
 
 The group's scene seed is the first candidate `scene_seed("t3", 8·g, a)` (a = 0, 1, …) on which the expert
@@ -13,7 +13,7 @@ worker), so all eight land on the same seed; slot k's attempt a uses candidate a
 stream. Columns: `source_group`, `source_kind` (scripted_expert / scripted_operator / bc_policy / human_teleop),
 `source_provenance` (JSON: operator parameters, or checkpoint, training steps and measured success),
 `group_id` (task and seed), `source_success`, `steps`.
-On LIBERO the operators and policies are `wsp_data/sources/libero_t3.py` (same groups, same interfaces).
+The tasks that have operators and policies are the platform's (`PlatformKit.t3_tasks`).
 """
 
 from __future__ import annotations
@@ -28,18 +28,8 @@ from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, scene_seed
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
 
-T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")  # ManiSkill's
-
-
-def t3_tasks(platform: str) -> tuple[str, ...]:
-    """The tasks with operator models and trained policies on `platform`."""
-    if platform == "libero":
-        from wsp_data.sources.libero_t3 import T3_TASKS as LIBERO_T3_TASKS
-
-        return LIBERO_T3_TASKS
-    return T3_TASKS
-OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # `wsp_data.sources.operators.OPERATORS` (tested)
-POLICY_GROUPS = ("policy_early", "policy_late")  # `wsp_data.sources.policies.STAGES` (tested)
+OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # each platform's operator models (tested)
+POLICY_GROUPS = ("policy_early", "policy_late")  # each platform's policy stages (tested)
 SOURCE_GROUPS = ("expert", *OPERATOR_GROUPS, *POLICY_GROUPS)
 GROUP_SIZE = len(SOURCE_GROUPS)
 
@@ -47,34 +37,21 @@ GROUP_SIZE = len(SOURCE_GROUPS)
 class _Rig(TaskRig):
     """One task's expert, operators and policies, with unrendered and rendered replays."""
 
-    def __init__(self, task: str, platform: str = "maniskill"):
+    def __init__(self, task: str, platform: str):
         super().__init__(task, platform)
-        self.task, self.platform = task, platform
+        self.task = task
         self._sources: dict[str, object] = {}
 
     def source(self, group: str):
         if group not in self._sources:
-            stage = group.removeprefix("policy_")
-            if self.platform == "libero":
-                from wsp_data.sources.libero_t3 import LiberoOperatorSource, LiberoPolicySource
-
-                self._sources[group] = (LiberoOperatorSource(self.task, group) if group in OPERATOR_GROUPS
-                                        else LiberoPolicySource(self.task, stage))
-            elif group in OPERATOR_GROUPS:
-                from wsp_data.sources.operators import OperatorSource
-
-                self._sources[group] = OperatorSource(self.task, group)
-            else:
-                from wsp_data.sources.policies import PolicySource
-
-                self._sources[group] = PolicySource(self.task, stage)
+            self._sources[group] = self.kit.t3_source(self.task, group)
         return self._sources[group]
 
     def stream(self, group: str, seed: int) -> tuple[np.ndarray | None, dict]:
         """The group's action stream on `seed` and its provenance (stream None: the source produced none)."""
         if group == "expert":
-            script = "libero_experts.PickPlaceScript" if self.platform == "libero" else f"experts.{self.task}"
-            return self.expert.trajectory(seed), {"kind": "scripted_expert", "script": script}
+            provenance = {"kind": "scripted_expert", "script": self.kit.expert_script(self.task)}
+            return self.expert.trajectory(seed), provenance
         src = self.source(group)
         if group in OPERATOR_GROUPS:
             actions = src.attempt(seed).actions  # failures are kept: the caller replays and records success
@@ -101,11 +78,10 @@ class T3Builder(SuiteBuilder):
                    "successes and failures kept. Columns `source_group`, `source_kind`, `source_provenance`, "
                    "`group_id`. Score: RMFA, per source group and overall.")
     roles = ("reference",)
-    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        known = t3_tasks(config.platform)
+        known = self.kit.t3_tasks()
         self.tasks = tuple(t for t in dict.fromkeys(config.tasks) if t in known)
         if not self.tasks:
             raise ValueError(f"T3 runs on {', '.join(known)} (trained policies and operator models); none selected")

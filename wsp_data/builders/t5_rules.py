@@ -13,9 +13,10 @@ definitions with the same 0.05 (here metres):
 - tap: a brief strike the object answers on its own: it travels ≥ 0.05 m (xy) while the robot touches it on
   at most 6 frames (0.3 s), none of them more than 6 frames after the object starts moving (a push keeps
   contact while the object moves; a tap has withdrawn).
-LIBERO (push, pull, tap, drop; SPEC) has no rolling prop: its tap strikes the task's own low target (a bowl or a
-flat box), which slides and stops on its own, so its tap needs xy ≥ `TAP_MIN_XY_LIBERO` (0.015 m, push's
-threshold) under the same brief-contact conditions (measured: 0.026–0.047 m with 1–3 contact frames).
+A platform may override a threshold for its scenes (`PlatformKit.t5_rule_thresholds`, keyword arguments of
+`check` / `passes`): LIBERO (push, pull, tap, drop; SPEC) has no rolling prop, its tap strikes the task's own low
+target (a bowl or a flat box), which slides and stops on its own, so its tap needs xy ≥ `tap_min_xy` = 0.015 m
+(push's threshold) under the same brief-contact conditions (measured: 0.026–0.047 m with 1–3 contact frames).
 Two identity conditions keep a primitive's label apart from its neighbours: rotate is in place (xy
 displacement ≤ 0.03 m, else it is a push that turned the object), and shake reverses direction at least 4
 times (two of its three cycles seen in the object, else it is a drag).
@@ -26,7 +27,6 @@ from __future__ import annotations
 import numpy as np
 
 PRIMITIVES = ("push", "pull", "drag", "rotate", "shake", "tap", "knock-over", "drop")
-PLATFORM_PRIMITIVES = {"maniskill": PRIMITIVES, "libero": ("push", "pull", "tap", "drop")}
 
 PUSH_MIN_XY = 0.015  # m
 PULL_MIN_TOWARD_BASE = 0.05  # m
@@ -40,7 +40,6 @@ SHAKE_MIN_REVERSALS = 4
 SHAKE_REVERSAL_XY = 0.01  # m a reversal must retreat from the last extreme
 SHAKE_REVERSAL_YAW = 0.03  # rad
 TAP_MIN_XY = 0.05  # m
-TAP_MIN_XY_LIBERO = 0.015  # m
 TAP_MAX_CONTACT_STEPS = 6  # frames (0.3 s at 20 Hz)
 MOTION_ONSET = 0.002  # m: the object "starts moving" once it is this far from its start
 KNOCK_MIN_TILT = 0.50  # rad
@@ -132,8 +131,9 @@ def measure(poses: np.ndarray, contacts: np.ndarray, base_xy) -> dict[str, float
     }
 
 
-def passes(primitive: str, m: dict[str, float], platform: str = "maniskill") -> bool:
-    """The acceptance rule of `primitive` on quantities from `measure` (on `platform`)."""
+def passes(primitive: str, m: dict[str, float], tap_min_xy: float = TAP_MIN_XY) -> bool:
+    """The acceptance rule of `primitive` on quantities from `measure` (`tap_min_xy`: a platform's override of
+    TAP_MIN_XY, m)."""
     if primitive == "push":
         return m["xy_displacement"] >= PUSH_MIN_XY
     if primitive == "pull":
@@ -146,8 +146,7 @@ def passes(primitive: str, m: dict[str, float], platform: str = "maniskill") -> 
         moved = m["horizontal_excursion"] >= SHAKE_MIN_HORIZONTAL or m["yaw_range"] >= SHAKE_MIN_YAW_RANGE
         return moved and m["z_range"] <= PLANAR_MAX_Z_RANGE and m["reversals"] >= SHAKE_MIN_REVERSALS
     if primitive == "tap":
-        least = TAP_MIN_XY_LIBERO if platform == "libero" else TAP_MIN_XY
-        return (m["xy_displacement"] >= least and m["contact_steps"] <= TAP_MAX_CONTACT_STEPS
+        return (m["xy_displacement"] >= tap_min_xy and m["contact_steps"] <= TAP_MAX_CONTACT_STEPS
                 and m["contact_after_onset"] <= TAP_MAX_CONTACT_STEPS)
     if primitive == "knock-over":
         return m["tilt_final"] >= KNOCK_MIN_TILT and m["tilt_increase"] >= KNOCK_MIN_TILT_INCREASE
@@ -157,7 +156,7 @@ def passes(primitive: str, m: dict[str, float], platform: str = "maniskill") -> 
 
 
 def check(primitive: str, poses: np.ndarray, contacts: np.ndarray, base_xy,
-          platform: str = "maniskill") -> tuple[bool, dict[str, float]]:
+          tap_min_xy: float = TAP_MIN_XY) -> tuple[bool, dict[str, float]]:
     """Measure and apply `primitive`'s rule: (passed, quantities)."""
     m = measure(poses, contacts, base_xy)
-    return passes(primitive, m, platform), m
+    return passes(primitive, m, tap_min_xy), m

@@ -22,7 +22,6 @@ class TrainBuilder(SuiteBuilder):
     description = ("Scripted-expert rollouts of the benchmark tasks on training-range scene seeds (disjoint from "
                    "every test suite), one episode per row, for training world models with LeRobot's dataloader.")
     roles = ("expert",)
-    platforms = frozenset({"maniskill", "libero"})
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)

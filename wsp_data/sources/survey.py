@@ -23,9 +23,8 @@ from wsp_data.platforms import KITS, kit
 COLUMNS = ("task", "seeds", "successes", "success rate", "mean length (steps)", "max length", "s / trajectory")
 
 
-def survey(tasks: Sequence[str], seeds: Iterable[int], *, progress: bool = True,
-           platform: str = "maniskill") -> list[dict]:
-    """Script and verify every seed of every task; one summary row per task.
+def survey(tasks: Sequence[str], seeds: Iterable[int], *, platform: str, progress: bool = True) -> list[dict]:
+    """Script and verify every seed of every task of `platform` (its kit's expert); one summary row per task.
 
     Row keys: `task`, `seeds` (tried), `successes`, `success_rate`, `mean_length` and `max_length` (steps of
     the verified trajectories, None if there are none) and `seconds_per_trajectory` (wall time of script +

@@ -16,8 +16,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
-from wsp_data.sources.libero_experts import LiberoTaskSpec, OutOfTime, PickPlaceScript
+from wsp_data.platforms.libero.env import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
+from wsp_data.platforms.libero.experts import LiberoTaskSpec, OutOfTime, PickPlaceScript
 
 # Push and tap need a target the hand can pass over: the Panda hand's collision body sits ~2 cm above the
 # fingertips, so beside a tall can or carton it hits the top (measured: the alphabet soup never moved; the

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wsp_data.platforms import Observation, PlatformError, Rollout, checked_stream
-from wsp_data.platforms.runtime import configure_cpu_rendering
+from wsp_data.platforms.maniskill.runtime import configure_cpu_rendering
 from wsp_data.schema import ACTION_DIM, IMAGE_SIZE, MAX_OBJECTS
 
 configure_cpu_rendering()

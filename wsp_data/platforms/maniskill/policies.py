@@ -4,7 +4,7 @@ For each T3 task a small MLP was trained (`scripts/train_policies.py`, CPU, fixe
 scripted expert trajectories of training seeds (`ExpertSource`) plus noise-injected re-executions of them,
 and two checkpoints were kept: an *early* one (10% of training) and the *late* (final) one; docs/policies.md
 has their measured success. `PolicySource(task, stage)` loads
-`wsp_data/sources/checkpoints/<task>_<stage>.pt` and runs the policy closed-loop in its own state-only
+`wsp_data/platforms/maniskill/checkpoints/<task>_<stage>.pt` and runs the policy closed-loop in its own state-only
 `ManiSkillPlatform`; the returned stream is a plain `pd_joint_pos` stream that `ManiSkillPlatform.replay`
 reproduces state for state (every episode starts from a rebuilt scene, and CPU PhysX is deterministic).
 
@@ -64,7 +64,7 @@ def _rot6d(q) -> np.ndarray:
 
 
 def num_objects(task: str) -> int:
-    from wsp_data.sources.experts import task_spec
+    from wsp_data.platforms.maniskill.experts import task_spec
 
     return len(task_spec(task).objects)
 
@@ -237,8 +237,8 @@ class PolicySource:
     @property
     def platform(self):
         if self._platform is None:
-            from wsp_data.platforms.maniskill import ManiSkillPlatform
-            from wsp_data.sources.experts import task_spec
+            from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+            from wsp_data.platforms.maniskill.experts import task_spec
 
             self._platform = ManiSkillPlatform(self.task, render=False, objects=task_spec(self.task).objects)
         return self._platform

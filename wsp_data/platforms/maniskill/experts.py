@@ -15,8 +15,8 @@ import sapien
 import trimesh
 from mani_skill.examples.motionplanning.base_motionplanner.utils import compute_grasp_info_by_obb, get_actor_obb
 
-from wsp_data.platforms.maniskill import ManiSkillPlatform
-from wsp_data.sources.skills import SkillScript, verify
+from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+from wsp_data.platforms.maniskill.skills import SkillScript, verify
 
 FINGER_LENGTH = 0.025
 TOOL_LEAN = 0.35  # rad the hand leans forward to hold a tool beyond a vertical hand's reach

@@ -51,12 +51,12 @@ import numpy as np
 import sapien
 from PIL import Image
 
-from wsp_data.platforms.maniskill import (
+from wsp_data.platforms.maniskill.env import (
     GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, Observation, _np, euler_xyz,
 )
 from wsp_data.schema import ACTION_DIM, FPS
-from wsp_data.sources.experts import ExpertSource, rotated, task_spec
-from wsp_data.sources.skills import SkillScript
+from wsp_data.platforms.maniskill.experts import ExpertSource, rotated, task_spec
+from wsp_data.platforms.maniskill.skills import SkillScript
 
 PROVENANCE_KIND = "human_teleop"
 TOOL = "wsp teleop"

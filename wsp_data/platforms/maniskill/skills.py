@@ -14,7 +14,7 @@ import numpy as np
 import sapien
 import torch
 
-from wsp_data.platforms.maniskill import (
+from wsp_data.platforms.maniskill.env import (
     GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, _np, euler_xyz,
 )
 

@@ -29,7 +29,7 @@ stream in a fresh `pd_joint_pos` env and returns the stream and whether the repl
 T3 keeps failures too, so the caller decides. `trajectory(seed)` is the `ExpertSource`-compatible form
 (the stream only when it succeeds, else None).
 
-    python -m wsp_data.sources.operators --seeds 10 [--tasks …] [--operators …]
+    python -m wsp_data.platforms.maniskill.operators --seeds 10 [--tasks …] [--operators …]
 
 measures success and the style measures of `stream_metrics` per task × operator (and the expert, whose
 neutral `EXPERT_STYLE` reproduces `ExpertSource`'s stream bit for bit) as Markdown tables.
@@ -48,9 +48,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import sapien
 
-from wsp_data.platforms.maniskill import GRIPPER_CLOSED, ManiSkillPlatform
-from wsp_data.sources.experts import task_spec
-from wsp_data.sources.skills import STEP_M, STEP_RAD, SkillScript, _angle, _slerp
+from wsp_data.platforms.maniskill.env import GRIPPER_CLOSED, ManiSkillPlatform
+from wsp_data.platforms.maniskill.experts import task_spec
+from wsp_data.platforms.maniskill.skills import STEP_M, STEP_RAD, SkillScript, _angle, _slerp
 
 T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
 CONTROL_HZ = 20  # ManiSkill's control frequency for these tasks

@@ -17,7 +17,7 @@ from functools import lru_cache
 import mujoco
 import numpy as np
 
-from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform, libero_task
+from wsp_data.platforms.libero.env import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform, libero_task
 
 ROT_SCALE = 0.5  # rad per unit of OSC rotation action
 GAIN = 12.0  # proportional gain: action = GAIN · error (m), clipped to ±MAX_ACTION

@@ -12,7 +12,7 @@ Failures are kept (the T3 builder records success).
 Policies (`LiberoPolicySource`): an MLP (`policies.MLPPolicy`) from simulator state to the 7-D OSC action,
 trained by behaviour cloning on scripted-expert trajectories of training seeds
 (`scripts/train_libero_policies.py`); an early (10%) and a late (final) checkpoint per task in
-`wsp_data/sources/checkpoints/libero/`. Features: qpos (9), grip-site position (3) and rotation 6-D (6), per task
+`wsp_data/platforms/libero/checkpoints/`. Features: qpos (9), grip-site position (3) and rotation 6-D (6), per task
 object position (3), rotation 6-D (6) and position relative to the grip site (3), phase = step / the expert's
 mean length (1). Output: the 6 arm dimensions (bounded to ±0.9) and the gripper (snapped to ±1).
 """
@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_data.platforms.libero import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
-from wsp_data.sources import libero_experts as lx
-from wsp_data.sources.libero_experts import PickPlaceScript, task_spec
+from wsp_data.platforms.libero.env import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
+from wsp_data.platforms.libero import experts as lx
+from wsp_data.platforms.libero.experts import PickPlaceScript, task_spec
 
 T3_TASKS = (
     "libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
@@ -39,7 +39,7 @@ T3_TASKS = (
 STAGES = ("early", "late")
 OPERATOR_STEP_BUDGET = 2.5  # × the expert's step budget (H1 takes about twice the expert's time)
 OPERATOR_SUCCESS_WAIT = 20  # steps an operator waits for the goal after its place move; then it has failed
-CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints" / "libero"
+CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
 SETTLE_STEPS = 5
 MAX_STEPS_FACTOR = 1.5
 
@@ -118,6 +118,7 @@ class LiberoOperatorSource:
 
     @property
     def provenance(self) -> dict:
+        # "model" keeps this module's former path: it is released data (source_provenance), not an import
         return {"kind": "scripted_operator", "operator": self.operator, "platform": "libero",
                 "model": "wsp_data.sources.libero_t3.OperatorScript", **self.style}
 
@@ -134,7 +135,7 @@ def feature_names(task: str) -> list[str]:
 
 
 def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
-    from wsp_data.sources.policies import _rot6d
+    from wsp_data.platforms.maniskill.policies import _rot6d
 
     ee = np.asarray(observation.tcp_pose, dtype=np.float64)
     parts = [np.asarray(observation.qpos, dtype=np.float64), ee[:3], _rot6d(ee[3:])]
@@ -153,7 +154,7 @@ class LiberoPolicySource:
     """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only LIBERO env."""
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        from wsp_data.sources.policies import open_checkpoint
+        from wsp_data.platforms.maniskill.policies import open_checkpoint
 
         if stage not in STAGES:
             raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
@@ -207,7 +208,7 @@ class LiberoPolicySource:
 
     @property
     def provenance(self) -> dict:
-        from wsp_data.sources.policies import sha256
+        from wsp_data.platforms.maniskill.policies import sha256
 
         m = self.meta
         return {"kind": "bc_policy", "platform": "libero", "task": self.task, "stage": self.stage,

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wsp_data.platforms import Observation, PlatformError, Rollout, checked_stream
-from wsp_data.platforms.libero_runtime import configure_libero
+from wsp_data.platforms.libero.runtime import configure_libero
 from wsp_data.schema import IMAGE_SIZE, MAX_OBJECTS
 
 _PATHS = configure_libero()

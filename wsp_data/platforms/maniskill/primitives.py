@@ -31,9 +31,9 @@ import sapien
 import sapien.physx as physx
 from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
 
-from wsp_data.platforms.maniskill import GRIPPER_CLOSED, GRIPPER_OPEN, ExtraActor, ManiSkillPlatform
-from wsp_data.sources.experts import rotated, top_grasp, turn_closing_to
-from wsp_data.sources.skills import SkillScript
+from wsp_data.platforms.maniskill.env import GRIPPER_CLOSED, GRIPPER_OPEN, ExtraActor, ManiSkillPlatform
+from wsp_data.platforms.maniskill.experts import rotated, top_grasp, turn_closing_to
+from wsp_data.platforms.maniskill.skills import SkillScript
 
 TALL_BOX = ExtraActor("tall_box", "box", (0.02, 0.02, 0.07), color=(0.95, 0.75, 0.1, 1.0), sleeps=False)
 TAP_BALL = ExtraActor("tap_ball", "sphere", (0.035, 0.035, 0.035), color=(0.1, 0.3, 0.9, 1.0), sleeps=False)
