@@ -17,15 +17,14 @@ from pathlib import Path  # noqa: E402
 import pytest  # noqa: E402
 
 from tiny_releases import LIBERO_SUITES, LIBERO_TASKS, T2_TASKS, TINY, build_config, shared_release  # noqa: E402,F401
-
-TINY_ARGS = {k: v for k, v in TINY.items() if k != "platform"}
+from wsp_eval.release_format import DEFAULT_RELEASE_NAME  # noqa: E402
 
 
 def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], out: Path | None = None,
                platform: str = "maniskill", **config) -> Path:
     """Build one config of a tiny real release into `out` (default: a fresh folder named `worldsimprobe`), for
     tests that need a build of their own."""
-    out = out or tmp_path_factory.mktemp(suite) / "worldsimprobe"
+    out = out or tmp_path_factory.mktemp(suite) / DEFAULT_RELEASE_NAME
     return build_config(out, suite, platform, count, tasks, **config)
 
 

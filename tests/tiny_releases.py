@@ -25,7 +25,8 @@ from pathlib import Path
 
 from filelock import FileLock
 
-RELEASE_DIR = "worldsimprobe"  # the folder name users load by (`load_dataset("worldsimprobe", ...)`)
+from wsp_eval.release_format import DEFAULT_RELEASE_NAME  # the folder users load by name
+
 DONE = ".built"  # marker beside the release: present once every config is assembled
 
 TINY = dict(suite="t1", platform="maniskill", count=4, tasks=("PickCube", "PushCube"), seed=0, max_attempts=8)
@@ -66,7 +67,7 @@ def shared_release(name: str, root: Path) -> Path:
         raise KeyError(f"no shared tiny release {name!r}; known: {', '.join(RELEASES)}")
     folder = root / name
     folder.mkdir(parents=True, exist_ok=True)
-    out = folder / RELEASE_DIR
+    out = folder / DEFAULT_RELEASE_NAME
     with FileLock(str(folder / ".lock")):
         if not (folder / DONE).exists():
             for suite, platform, count, tasks, extra in RELEASES[name]:

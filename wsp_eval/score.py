@@ -32,8 +32,7 @@ import pyarrow.parquet as pq
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.release_format import INSTANCES, load_release
-from wsp_eval.submission import SUBMISSION_JSON, Expected, load_video, test_configs, validate
-from wsp_eval.submission import check_sizes
+from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
