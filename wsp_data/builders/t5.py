@@ -95,13 +95,13 @@ class T5Builder(SuiteBuilder):
         b = rig.branch(plan.group, seed)
         if isinstance(b, Dropped):
             return b
-        return self._validate(plan, rig, seed, b.source, b.stream, b.placements, b.branch, b.contact, b.evaluated,
-                              b.simulated)
+        return self._validate(plan, rig, seed, b)
 
-    def _validate(self, plan: SlotPlan, rig, seed: int, source: np.ndarray, stream: np.ndarray, placements,
-                  branch: int, contact: int, evaluated: str, simulated: int) -> Kept | Dropped:
+    def _validate(self, plan: SlotPlan, rig, seed: int, b: Branch) -> Kept | Dropped:
         """Replay the branched stream unrendered, check it, render it, check again, and make the instance."""
         primitive, spec = plan.group, rig.spec
+        source, stream, placements, evaluated = b.source, b.stream, b.placements, b.evaluated
+        simulated = b.simulated
         ev = rig.objects.index(evaluated)
         ro = rig.state.replay(seed, stream, placements)
         simulated += len(stream)
@@ -114,12 +114,12 @@ class T5Builder(SuiteBuilder):
         poses = rendered.stack("object_poses")
         base_xy = rig.base_xy()
         _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy, **self.thresholds)
-        parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": branch,
+        parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": b.branch,
                       "placements": {k: v.astype(float).tolist() for k, v in (placements or {}).items()}}
         row = {
             "task": plan.task, "seed": seed, "instruction": spec.instruction, "objects": list(rig.objects),
             "source": "scripted_expert+scripted_primitive", "primitive": primitive, "evaluated_object": evaluated,
-            "evaluated_index": ev, "branch_step": branch, "first_contact_step": contact,
+            "evaluated_index": ev, "branch_step": b.branch, "first_contact_step": b.contact,
             "source_length": len(source), "robot_base_xy": base_xy,
             "object_pixel_256": [float(x) for x in project(poses[0, ev, :3], rendered.intrinsic,
                                                            rendered.extrinsic, IMAGE_SIZE)],
