@@ -64,12 +64,14 @@ def by_file(sub: Path, release: Path) -> dict[str, list[str]]:
     return out
 
 
-def encode(path: Path, frames: np.ndarray, fps=20, fmt: str | None = None, options: dict | None = None) -> None:
-    """A real h264 (yuv420p, ultrafast) file: quick to write at any size or length, like a model's export."""
+def encode(path: Path, frames: np.ndarray, fps=20, fmt: str | None = None, options: dict | None = None,
+           pix_fmt: str = "yuv444p", quality: dict | None = None) -> None:
+    """A real h264 file, lossless 4:4:4 unless told otherwise (the accepted encoding; `pix_fmt` and `quality`
+    make a lossy one), ultrafast: quick to write at any size or length, like a model's export."""
     with av.open(str(path), "w", format=fmt, options=options or {}) as container:
         stream = container.add_stream("libx264", rate=fps)
-        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], "yuv420p"
-        stream.options = {"preset": "ultrafast"}
+        stream.width, stream.height, stream.pix_fmt = frames.shape[2], frames.shape[1], pix_fmt
+        stream.options = {"preset": "ultrafast", **(quality or {"qp": "0"})}
         for frame in frames:
             for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
                 container.mux(packet)
@@ -286,3 +288,71 @@ def test_score_keeps_every_other_instance_and_resumes(sub, t1_release, oracle_re
     assert again["timing"]["instances"] == 3 and [r["score"] for r in again["instances"]] == scores
     assert again["platforms"] == report["platforms"]
     assert score_submission(sub, t1_release, out, progress=False, allow_missing=True)["timing"]["instances"] == 0
+
+
+# -- encodings (SPEC §4 "Encoding of submissions"; docs/validity.md) ------------------------------------------
+LOSSY = {  # name → (pix_fmt, quality, the problem's first words)
+    "4:2:0 crf 23": ("yuv420p", {"crf": "23"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),
+    "4:2:0 qp 0": ("yuv420p", {"qp": "0"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),
+    "4:4:4 crf 18": ("yuv444p", {"crf": "18"}, "lossy h264 (pix_fmt yuv444p, quantised: crf or qp above 0)"),
+}
+
+
+@pytest.mark.parametrize("name", LOSSY)
+def test_lossy_or_chroma_subsampled_videos_are_refused_with_the_fix(sub, t1_release, name):
+    pix_fmt, quality, problem = LOSSY[name]
+    frames, fps = read_video(sub / rel(2))
+    encode(sub / rel(2), frames, fps=fps, pix_fmt=pix_fmt, quality=quality)
+    (message,) = by_file(sub, t1_release)[rel(2)]
+    assert message.startswith(problem + "; save the model's frames losslessly: `wsp generate`")
+    assert "libx264rgb -crf 0" in message
+    frames_back, _ = read_video(sub / rel(2))  # without the contract's check it decodes: only the contract refuses
+    assert frames_back.shape == frames.shape
+
+
+@pytest.mark.parametrize("codec", ["png", "mpeg4"])
+def test_other_codecs(sub, t1_release, codec):
+    """PNG in mp4 is lossless and accepted; any other codec is refused by name."""
+    frames, fps = read_video(sub / rel(5))
+    with av.open(str(sub / rel(5)), "w") as container:
+        stream = container.add_stream(codec, rate=int(fps))
+        stream.width, stream.height = frames.shape[2], frames.shape[1]
+        stream.pix_fmt = "rgb24" if codec == "png" else "yuv420p"
+        for frame in frames:
+            for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
+                container.mux(packet)
+        for packet in stream.encode():
+            container.mux(packet)
+    if codec == "png":
+        assert validate(sub, t1_release) == []
+        assert np.array_equal(read_video(sub / rel(5))[0], frames)
+    else:
+        assert by_file(sub, t1_release)[rel(5)][0].startswith("mpeg4 video is not an accepted encoding")
+
+
+def test_lossless_444_passes_and_lossy_scores_only_when_accepted(sub, t1_release, oracle_report, tmp_path):
+    """Lossless 4:4:4 YUV (colour conversion rounding only) keeps the oracle's score; a lossy video stops
+    `wsp score` unless --accept-lossy, and then the report says the check was off."""
+    for i in (0, 1, 2):
+        frames, fps = read_video(sub / rel(i))
+        encode(sub / rel(i), frames, fps=fps)
+    assert validate(sub, t1_release) == []
+    report = score_submission(sub, t1_release, tmp_path / "lossless", progress=False)
+    # tolerance: 4:4:4 YUV rounds each colour by at most ~1 level; measured change 0.0 points (docs/validity.md)
+    assert abs(report["instances"][0]["score"] - oracle_report["instances"][0]["score"]) < 2.0
+    frames, fps = read_video(sub / rel(1))
+    encode(sub / rel(1), frames, fps=fps, pix_fmt="yuv420p", quality={"crf": "23"})
+    with pytest.raises(ScoreError, match="chroma-subsampled"):
+        score_submission(sub, t1_release, tmp_path / "refused", progress=False)
+    report = score_submission(sub, t1_release, tmp_path / "accepted", progress=False, accept_lossy=True)
+    assert report["encoding_check"].startswith("off") and report["problems"] == []
+    md = (tmp_path / "accepted" / "report.md").read_text()
+    assert "not comparable with lossless submissions" in md
+
+
+def test_the_h264_parameter_set_parser_on_damaged_input():
+    from wsp_eval.video import h264_sps
+
+    assert h264_sps(b"") is None
+    assert h264_sps(b"\x01\x64\x00\x1f\xff\xe1\x00\x02\x67") is None  # a truncated SPS
+    assert h264_sps(b"\x00\x00\x00\x01\x68\xee") is None  # Annex B without an SPS

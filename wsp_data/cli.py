@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 from wsp_data.platforms import KITS
-from wsp_data.schema import DEFAULT_RELEASE_NAME, SUITES
+from wsp_data.schema import DEFAULT_RELEASE_NAME, SEED_BASE, SUITES
 from wsp_eval.registry import PluginError
 
 PAPER_COUNTS = {  # paper Table S3 (SPEC §3)
@@ -62,6 +62,9 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--out", type=Path, default=Path(DEFAULT_RELEASE_NAME), help="release folder (default: ./worldsimprobe)")
     b.add_argument("--tasks", nargs="+", help="restrict to these tasks (default: all solved benchmark tasks)")
     b.add_argument("--seed", type=int, default=0, help="build seed (default 0)")
+    b.add_argument("--seed-range", choices=sorted(SEED_BASE), default="",
+                   help="draw scene seeds from this suite's range instead of the config's own (e.g. `train` for "
+                        "judge-training data that never shares a scene with a test suite)")
     b.add_argument("--max-attempts", type=_positive, default=8, help="proposals per instance slot before giving up")
     b.add_argument("--shard", type=_shard, default=(0, 1), help="build only slots k with k %% n == i (i/n)")
     b.add_argument("--workers", type=_positive, default=1, help="worker processes (each holds its own simulators)")
@@ -120,6 +123,9 @@ def _score_options(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("--workers", type=_positive, default=1, help="scoring processes (default 1)")
     p.add_argument("--allow-missing", action="store_true", help="score missing or unusable videos as 0")
+    p.add_argument("--accept-lossy", action="store_true",
+                   help="score lossy or chroma-subsampled videos instead of refusing them (the report says so; "
+                        "such scores are not comparable: codec noise lowers T1 most)")
     p.add_argument("--flow", choices=FLOW, default="dis")
     p.add_argument("--flow-checkpoint", help="local checkpoint for --flow dpflow")
     p.add_argument("--tracker", choices=TRACKER, default="lk")
@@ -150,7 +156,7 @@ def cmd_build(args) -> int:
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
     try:
         count = args.count or PAPER_COUNTS.get(args.platform, {}).get(args.suite) or EPISODES_PER_TASK * len(tasks)
-        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts)
+        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet)
     except (BuildError, ValueError) as e:
@@ -252,7 +258,8 @@ def _score(submission: Path, release: Path, out: Path, args) -> dict:
 
     try:
         return score_submission(submission, release, out, spec=_spec(args), workers=args.workers,
-                                allow_missing=args.allow_missing, progress=not args.quiet)
+                                allow_missing=args.allow_missing, accept_lossy=args.accept_lossy,
+                                progress=not args.quiet)
     except (ScoreError, BackendUnavailable) as e:
         raise CliError(str(e)) from None
 

@@ -93,6 +93,8 @@ def _header(report: dict) -> list[tuple[str, str]]:
     if sub.get("generation_seconds") is not None:
         items.append(("Generation time", f"{sub['generation_seconds']:.1f} s"))
     items.append(("Missing rollouts", _missing(report)))
+    if report.get("encoding_check", "lossless only") != "lossless only":
+        items.append(("Encoding check", f"{report['encoding_check']}: not comparable with lossless submissions"))
     timing = report.get("timing") or {}
     n = len(report.get("instances") or []) or timing.get("instances")
     if n is not None or timing:

@@ -11,6 +11,9 @@
   `allow_missing` a missing file stops scoring before it starts and a broken one stops it at the end (the
   finished instances are cached); with it, the seed of every affected instance scores 0 and the report
   counts and lists the problems.
+- Encoding: a lossy or chroma-subsampled video is a problem (`wsp_eval.video.encoding_problem`, docs/validity.md);
+  `accept_lossy` scores it anyway, and the report says the encoding check was off (such scores are not
+  comparable with others: codec noise lowers T1 most).
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
   submission, release and backends skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
@@ -56,6 +59,7 @@ class Job:
     config: str
     row: dict
     seeds: tuple[int, ...]
+    accept_lossy: bool = False
 
 
 def split_config(config: str) -> tuple[str, str]:
@@ -74,10 +78,10 @@ def _backends(spec: BackendSpec, needs: tuple[str, ...]) -> Backends:
     return _BACKENDS[key]
 
 
-def _load(path: Path, expected: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, str | None]:
+def _load(path: Path, expected: Expected, rel: str, accept_lossy: bool) -> tuple[tuple[np.ndarray, float] | None, str | None]:
     if not path.is_file():
         return None, f"{rel}: missing"
-    video, problems = load_video(path, expected, rel)
+    video, problems = load_video(path, expected, rel, accept_lossy=accept_lossy)
     return video, ("; ".join(map(str, problems)) or None)
 
 
@@ -87,7 +91,7 @@ def _load_seed(job: Job, seed: int) -> tuple[dict[str, tuple[np.ndarray, float]]
     videos, rels, problems = {}, {}, []
     for role, episode_id, n in zip(job.row["roles"], job.row["episode_ids"], job.row["num_frames"]):
         exp = Expected(job.config, episode_id, seed, n, job.row["fps"])
-        video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath)
+        video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath, job.accept_lossy)
         if problem:
             problems.append(problem)
         else:
@@ -132,11 +136,12 @@ def _rows(release: Path, config: str) -> list[dict]:
     return pq.read_table(release / config / INSTANCES).to_pylist()
 
 
-def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list[str]) -> dict:
+def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list[str], accept_lossy: bool) -> dict:
     manifest = (submission / SUBMISSION_JSON).read_bytes()
     rel = (release / "release.json").read_bytes()
-    return {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
-            "backends": spec.to_json(), "configs": configs}
+    key = {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
+           "backends": spec.to_json(), "configs": configs}
+    return {**key, "accept_lossy": True} if accept_lossy else key
 
 
 def _open_cache(out: Path, key: dict) -> dict[tuple[str, str], dict]:
@@ -177,7 +182,8 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
 
 
 def score_submission(submission: Path, release: Path, out: Path, *, spec: BackendSpec = BackendSpec(),
-                     workers: int = 1, allow_missing: bool = False, progress: bool = True) -> dict:
+                     workers: int = 1, allow_missing: bool = False, accept_lossy: bool = False,
+                     progress: bool = True) -> dict:
     """Score `submission` against `release`; write the reports under `out`; return the report dict."""
     from tqdm import tqdm
 
@@ -189,9 +195,9 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
     backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
     out.mkdir(parents=True, exist_ok=True)
-    done = _open_cache(out, _cache_key(submission, release, spec, configs))
+    done = _open_cache(out, _cache_key(submission, release, spec, configs, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
-    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]))
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy)
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
     bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress)
@@ -224,7 +230,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
         release={"path": str(release), "version": rel_meta["version"],
                  "code_version": str(rel_meta.get("code_version", ""))},
         backends=backends.describe(),
-        allow_missing=allow_missing, problems=problems,
+        allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
+        problems=problems,
         timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
         instances=records,
     )

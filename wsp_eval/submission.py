@@ -4,7 +4,7 @@
     <submission>/<config>/<episode_id>/seed<k>.mp4
 
 `validate` lists every problem at once, each naming the file: missing or extra files, unreadable or
-truncated videos, zero frames, a frame count other than the reference horizon, a side over `MAX_SIDE`,
+truncated videos, lossy or chroma-subsampled encodings (`wsp_eval.video.encoding_problem`), zero frames, a frame count other than the reference horizon, a side over `MAX_SIDE`,
 videos of one instance at different resolutions, constant videos, fps missing or absurd, links (a
 submission holds plain files only; a link pointing outside it is named as such), a submission.json over
 `MAX_MANIFEST_BYTES` or malformed, and a benchmark version that does not match the release. It never raises
@@ -127,13 +127,15 @@ def _links(sub: Path) -> list[Problem]:
     return problems
 
 
-def load_video(path: Path, exp: Expected, rel: str) -> tuple[tuple[np.ndarray, float] | None, list[Problem]]:
-    """Decode a submitted video once, bounded by the reference horizon and `MAX_SIDE` (`read_video`): (frames,
-    fps) when it meets the contract, and its problems."""
+def load_video(path: Path, exp: Expected, rel: str, *, accept_lossy: bool = False
+               ) -> tuple[tuple[np.ndarray, float] | None, list[Problem]]:
+    """Decode a submitted video once, bounded by the reference horizon and `MAX_SIDE` (`read_video`) and, unless
+    `accept_lossy`, refused when its encoding is lossy (`wsp_eval.video.encoding_problem`): (frames, fps) when it
+    meets the contract, and its problems."""
     if path.stat().st_size == 0:
         return None, [Problem(rel, "empty file (zero frames)")]
     try:
-        frames, fps = read_video(path, max_frames=exp.num_frames)
+        frames, fps = read_video(path, max_frames=exp.num_frames, lossless=not accept_lossy)
     except VideoError as e:
         return None, [Problem(rel, str(e).removeprefix(f"{path}: "))]
     problems = check_frames(frames, fps, exp, rel)

@@ -47,6 +47,12 @@ class VideoError(ValueError):
 
 MIN_FPS, MAX_FPS = 1.0, 240.0  # a submission's fps outside this range is treated as absurd
 REEXPORT = "re-export it as an h264 mp4 (`wsp_eval.video.write_video` writes the accepted encoding)"
+LOSSLESS_FIX = ("save the model's frames losslessly: `wsp generate` and `wsp_eval.video.write_video` do (h264 RGB, "
+                "crf 0), as does `ffmpeg -i FRAMES -c:v libx264rgb -crf 0 seedK.mp4`; re-encoding a lossy file "
+                "losslessly keeps its codec noise, so export from the frames the model produced")
+"""The submission's encoding contract (SPEC §4 "Encoding of submissions"; docs/validity.md): every frame exactly as
+the model produced it. Lossy codecs and chroma subsampling add noise that T1 reads as action compression (the
+oracle as h264 yuv420p crf 23 falls from 99.9 to 43 on T1), so they are refused before decoding."""
 MAX_SIDE = 512
 """The largest width or height of a submitted video. The largest reference camera is 320×240 (RoboTwin;
 ManiSkill and LIBERO render 128×128, SPEC §1), T2/T3 compare flows at 160×120 and T4 tracks in 256², so more
@@ -55,12 +61,13 @@ pixels score nothing; 512 admits the usual generation sizes (256², 512²) and b
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
 
 
-def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE) -> tuple[np.ndarray, float]:
+def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
+               lossless: bool = False) -> tuple[np.ndarray, float]:
     """Decode a video file as RGB uint8 (N, H, W, 3) and return it with its fps, in bounded memory: with
     `max_frames` (the reference horizon) the file size and the stream header's frame count are checked before
     decoding and decoding stops at the first frame past it (a header can lie: frames are counted); the header's
-    resolution and every decoded frame's are checked against `max_side`. A VideoError names the file, what was
-    found, what is allowed and the fix."""
+    resolution and every decoded frame's are checked against `max_side`; with `lossless` the stream must be
+    lossless (`encoding_problem`). A VideoError names the file, what was found, what is allowed and the fix."""
     import av
 
     if max_frames is not None:
@@ -71,6 +78,8 @@ def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE) ->
                 raise VideoError(f"{path}: no video stream; {REEXPORT}")
             stream = container.streams.video[0]
             _check_header(path, stream, max_frames, max_side)
+            if lossless and (why := encoding_problem(stream)) is not None:
+                raise VideoError(f"{path}: {why}; {LOSSLESS_FIX}")
             rate = stream.average_rate or stream.guessed_rate
             frames = _decode(path, container.decode(stream), max_frames, max_side)
     except VideoError:
@@ -108,6 +117,90 @@ def _check_header(path, stream, max_frames: int | None, max_side: int) -> None:
     _check_side(path, stream.codec_context.width, stream.codec_context.height, max_side)
     if max_frames is not None and stream.frames > max_frames:
         raise _too_many(path, f"{stream.frames} frames (stream header)", max_frames)
+
+
+def encoding_problem(stream) -> str | None:
+    """Why a video stream is not lossless, from its codec parameters alone (None: accepted). Accepted: PNG, and
+    H.264 whose sequence parameter set is 4:4:4 (RGB or YUV, no chroma subsampling) with the lossless flag
+    (`qpprime_y_zero_transform_bypass_flag`, set by x264 at qp 0 / crf 0)."""
+    cc = stream.codec_context
+    if cc.name == "png":
+        return None
+    if cc.name != "h264":
+        return f"{cc.name} video is not an accepted encoding (lossless h264 or png)"
+    sps = h264_sps(bytes(cc.extradata or b""))
+    if sps is None:
+        return "h264 without a readable sequence parameter set, so it cannot be shown to be lossless"
+    chroma_format, lossless_flag = sps
+    if chroma_format != 3:
+        kind = {0: "monochrome", 1: "4:2:0", 2: "4:2:2"}.get(chroma_format, str(chroma_format))
+        return f"chroma-subsampled h264 ({kind}, pix_fmt {cc.pix_fmt}): colour is stored at reduced resolution"
+    if not lossless_flag:
+        return f"lossy h264 (pix_fmt {cc.pix_fmt}, quantised: crf or qp above 0)"
+    return None
+
+
+_HIGH_PROFILES = {100, 110, 122, 244, 44, 83, 86, 118, 128, 138, 139, 134, 135}
+
+
+def h264_sps(extradata: bytes) -> tuple[int, int] | None:
+    """(chroma_format_idc, qpprime_y_zero_transform_bypass_flag) of the first sequence parameter set in H.264
+    extradata (mp4 `avcC` or Annex B), per ITU-T H.264 §7.3.2.1.1; None when there is none or it is malformed."""
+    try:
+        if extradata[:1] == b"\x01" and len(extradata) > 8 and extradata[5] & 0x1F:  # avcC
+            nal = extradata[8:8 + int.from_bytes(extradata[6:8], "big")]
+        else:  # Annex B: start-code-separated NAL units
+            nal = next((u for u in extradata.replace(b"\x00\x00\x01", b"\x00\x00\x00\x01").split(b"\x00\x00\x00\x01")
+                        if u and u[0] & 0x1F == 7), b"")
+        if not nal or nal[0] & 0x1F != 7:
+            return None
+        bits = _Bits(_unescape(nal[1:]))
+        profile = bits.u(8)
+        bits.u(16)  # constraint flags, level
+        bits.ue()  # seq_parameter_set_id
+        if profile not in _HIGH_PROFILES:
+            return 1, 0  # baseline / main / extended: 4:2:0, never lossless
+        chroma_format = bits.ue()
+        if chroma_format == 3:
+            bits.u(1)  # separate_colour_plane_flag
+        bits.ue(), bits.ue()  # bit depths
+        return chroma_format, bits.u(1)
+    except (IndexError, ValueError):
+        return None
+
+
+def _unescape(payload: bytes) -> bytes:
+    """The RBSP of a NAL payload: every emulation-prevention byte (0x03 after two zero bytes) removed."""
+    out, zeros = bytearray(), 0
+    for b in payload:
+        if zeros >= 2 and b == 3:
+            zeros = 0
+            continue
+        out.append(b)
+        zeros = zeros + 1 if b == 0 else 0
+    return bytes(out)
+
+
+class _Bits:
+    """MSB-first bit reader with Exp-Golomb codes."""
+
+    def __init__(self, data: bytes):
+        self.data, self.pos = data, 0
+
+    def u(self, n: int) -> int:
+        v = 0
+        for _ in range(n):
+            v = (v << 1) | ((self.data[self.pos >> 3] >> (7 - (self.pos & 7))) & 1)
+            self.pos += 1
+        return v
+
+    def ue(self) -> int:
+        zeros = 0
+        while self.u(1) == 0:
+            zeros += 1
+            if zeros > 31:
+                raise ValueError("malformed Exp-Golomb code")
+        return (1 << zeros) - 1 + self.u(zeros)
 
 
 def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int) -> list[np.ndarray]:
