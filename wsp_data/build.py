@@ -95,7 +95,7 @@ def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
     record = SlotRecord(slot)
     rollouts: list[RolloutArrays] = []
     for a in range(cfg.max_attempts):
-        seed = scene_seed(cfg.suite, slot, a)
+        seed = scene_seed(cfg.scene_suite, slot, a)
         try:
             out = builder.attempt(plan, seed, cfg.rng(slot, a))
         except Exception as e:  # noqa: BLE001 - a simulator crash drops the proposal and is reported

@@ -3,7 +3,7 @@ base class whose hooks a suite module fills in.
 
 A build has `count` slots. Slot k is planned by `SuiteBuilder.plan(k)` (default: task `tasks[k % len(tasks)]`,
 no group; suites balanced by kind or primitive override it) and tries attempts
-a = 0, 1, … (scene seed `scene_seed(suite, k, a)`, proposal RNG seeded by (build seed, k, a)) until one
+a = 0, 1, … (scene seed `scene_seed(config.scene_suite, k, a)`, proposal RNG seeded by (build seed, k, a)) until one
 is kept or `max_attempts` are spent. A slot's outcome depends only on (config, k): shards, workers and
 resumed runs therefore produce the same instances.
 """
@@ -18,7 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from wsp_data.platforms import KITS, kit
-from wsp_data.schema import MAX_ATTEMPTS, SUITES
+from wsp_data.schema import MAX_ATTEMPTS, SEED_BASE, SUITES
 from wsp_data.staging import RolloutArrays
 
 
@@ -32,6 +32,7 @@ class BuildConfig:
     tasks: tuple[str, ...]
     seed: int = 0
     max_attempts: int = 8
+    seed_range: str = ""  # scene seeds from this suite's range ("" = the config's own suite); "train" for judge data
 
     def __post_init__(self):
         if self.suite not in SUITES:
@@ -44,6 +45,13 @@ class BuildConfig:
             raise ValueError("no tasks selected")
         if not 1 <= self.max_attempts <= MAX_ATTEMPTS:
             raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
+        if self.seed_range and self.seed_range not in SEED_BASE:
+            raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join(SEED_BASE)}")
+
+    @property
+    def scene_suite(self) -> str:
+        """Whose scene-seed range the slots draw from (`schema.SEED_BASE`)."""
+        return self.seed_range or self.suite
 
     @property
     def name(self) -> str:
@@ -52,6 +60,8 @@ class BuildConfig:
     def to_json(self) -> dict:
         d = asdict(self)
         d["tasks"] = list(self.tasks)
+        if not d["seed_range"]:
+            del d["seed_range"]  # the default is left out, so configs written before the field read the same
         return d
 
     @classmethod

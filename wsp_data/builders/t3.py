@@ -117,8 +117,8 @@ class T3Builder(SuiteBuilder):
         return streams
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
-        slot, attempt = divmod(seed - SEED_BASE["t3"], MAX_ATTEMPTS)
-        group_seed = scene_seed("t3", GROUP_SIZE * (slot // GROUP_SIZE), attempt)
+        slot, attempt = divmod(seed - SEED_BASE[self.config.scene_suite], MAX_ATTEMPTS)
+        group_seed = scene_seed(self.config.scene_suite, GROUP_SIZE * (slot // GROUP_SIZE), attempt)
         streams = self.group(plan.task, group_seed)
         if isinstance(streams, str):
             return Dropped(f"group_{streams}")
