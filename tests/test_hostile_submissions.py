@@ -302,9 +302,9 @@ LOSSY = {  # name → (pix_fmt, quality, the problem's first words)
 def test_lossy_or_chroma_subsampled_videos_are_refused_with_the_fix(sub, t1_release, name):
     pix_fmt, quality, problem = LOSSY[name]
     frames, fps = read_video(sub / rel(2))
-    encode(sub / rel(2), frames, fps=fps, pix_fmt=pix_fmt, quality=quality)
+    encode(sub / rel(2), frames, fps=int(fps), pix_fmt=pix_fmt, quality=quality)
     (message,) = by_file(sub, t1_release)[rel(2)]
-    assert message.startswith(problem + "; save the model's frames losslessly: `wsp generate`")
+    assert message.startswith(problem) and "; save the model's frames losslessly: `wsp generate`" in message
     assert "libx264rgb -crf 0" in message
     frames_back, _ = read_video(sub / rel(2))  # without the contract's check it decodes: only the contract refuses
     assert frames_back.shape == frames.shape
@@ -335,13 +335,13 @@ def test_lossless_444_passes_and_lossy_scores_only_when_accepted(sub, t1_release
     `wsp score` unless --accept-lossy, and then the report says the check was off."""
     for i in (0, 1, 2):
         frames, fps = read_video(sub / rel(i))
-        encode(sub / rel(i), frames, fps=fps)
+        encode(sub / rel(i), frames, fps=int(fps))
     assert validate(sub, t1_release) == []
     report = score_submission(sub, t1_release, tmp_path / "lossless", progress=False)
     # tolerance: 4:4:4 YUV rounds each colour by at most ~1 level; measured change 0.0 points (docs/validity.md)
     assert abs(report["instances"][0]["score"] - oracle_report["instances"][0]["score"]) < 2.0
     frames, fps = read_video(sub / rel(1))
-    encode(sub / rel(1), frames, fps=fps, pix_fmt="yuv420p", quality={"crf": "23"})
+    encode(sub / rel(1), frames, fps=int(fps), pix_fmt="yuv420p", quality={"crf": "23"})
     with pytest.raises(ScoreError, match="chroma-subsampled"):
         score_submission(sub, t1_release, tmp_path / "refused", progress=False)
     report = score_submission(sub, t1_release, tmp_path / "accepted", progress=False, accept_lossy=True)
