@@ -27,6 +27,13 @@ JUDGE: Registry[Factory] = Registry("judge backend", "worldsimprobe.judge")
 REGISTRIES = {"flow": FLOW, "tracker": TRACKER, "judge": JUDGE}
 
 
+@JUDGE.register("net")
+def _net_judge(spec: BackendSpec):
+    from wsp_eval.backends.judge_net import NetJudge
+
+    return NetJudge(spec.judge_checkpoint)
+
+
 @JUDGE.register("rules")
 def _rules_judge(spec: BackendSpec):
     from wsp_eval.backends.judge_rules import RulesJudge
@@ -85,6 +92,7 @@ class BackendSpec:
     tracker_checkpoint: str | None = None
     judge_url: str | None = None
     judge_model: str | None = None
+    judge_checkpoint: str | None = None  # judge `net`: other weights than the packaged ones
 
     def __post_init__(self):
         for role, registry in REGISTRIES.items():

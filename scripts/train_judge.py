@@ -1,0 +1,226 @@
+"""Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
+export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
+
+    # the data: T5 references on training-range seeds (never a test seed), one config per platform
+    wsp build --platform maniskill --suite t5 --seed-range train --count 128 --out judge-train
+    wsp build --platform libero    --suite t5 --seed-range train --count 48  --out judge-train
+    .venv/bin/python scripts/train_judge.py judge-train --out wsp_eval/backends/weights/judge_net_v1.onnx
+
+Clips (`wsp_eval.judge_data`): every reference (label, agent and object true), frame 0 repeated (both false),
+the approach before first contact (object false) and the robot held still while the object moves (agent
+false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
+gain/offset, left–right mirroring, jittered frame sampling with repeated frames, a shifted object position.
+Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.
+The training record (data checksums, counts, epochs, losses, train accuracy) is written beside the weights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+from torch import nn
+
+from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
+from wsp_eval.backends.judge_net import CHANNELS, judge_input
+from wsp_eval.judge_data import DENSE, Clip, t5_clips
+from wsp_eval.release_format import RELEASE_JSON
+
+EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 30, 32, 2e-3, 1e-4, 0
+
+
+class JudgeNet(nn.Module):
+    """Five 3×3 convolutions (stride 2 but the second), batch norm, ReLU; global average pool; 10 outputs."""
+
+    def __init__(self, width: tuple[int, ...] = (32, 48, 64, 96, 96)):
+        super().__init__()
+        layers, cin = [], CHANNELS
+        for i, c in enumerate(width):
+            layers += [nn.Conv2d(cin, c, 3, 1 if i == 1 else 2, 1, bias=False), nn.BatchNorm2d(c), nn.ReLU()]
+            cin = c
+        self.features = nn.Sequential(*layers)
+        self.head = nn.Sequential(nn.AdaptiveAvgPool2d(1), nn.Flatten(), nn.Dropout(0.2),
+                                  nn.Linear(cin, len(PRIMITIVES) + 2))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.head(self.features(x))
+
+
+def augment(clip: Clip, rng: np.random.Generator) -> tuple[np.ndarray, tuple[float, float]]:
+    """One augmented view of a clip: (12 frames, object position)."""
+    base = np.round(np.linspace(0, DENSE - 1, JUDGE_FRAMES)).astype(int)
+    idx = np.clip(base + rng.integers(-1, 2, JUDGE_FRAMES), 0, DENSE - 1)
+    idx[0] = 0
+    idx = np.maximum.accumulate(idx)
+    if rng.random() < 0.2:  # a dropped frame: its neighbour repeated
+        k = int(rng.integers(1, JUDGE_FRAMES))
+        idx[k] = idx[k - 1]
+    frames = clip.dense[idx].astype(np.float32)
+    x, y = clip.object_px
+    x, y = x + rng.normal(0, 2), y + rng.normal(0, 2)
+    if rng.random() < 0.5:
+        frames = frames[:, :, ::-1]
+        x = 256.0 - x
+    gain = rng.uniform(0.85, 1.15) * rng.uniform(0.93, 1.07, 3)
+    frames = np.clip(frames * gain + rng.uniform(-15, 15), 0, 255).astype(np.uint8)
+    h, w = frames.shape[1:3]
+    if rng.random() < 0.3:
+        side = int(rng.choice([64, 96]))
+        frames = np.stack([cv2.resize(cv2.resize(f, (side, side), interpolation=cv2.INTER_AREA), (w, h),
+                                      interpolation=cv2.INTER_LINEAR) for f in frames])
+    if rng.random() < 0.3:
+        sigma = rng.uniform(0.5, 1.5)
+        frames = np.stack([cv2.GaussianBlur(f, (0, 0), sigma) for f in frames])
+    if rng.random() < 0.5:
+        q = int(rng.integers(30, 90))
+        frames = np.stack([cv2.imdecode(cv2.imencode(".jpg", np.ascontiguousarray(f),
+                                                     [cv2.IMWRITE_JPEG_QUALITY, q])[1], cv2.IMREAD_UNCHANGED)
+                           for f in frames])
+    return np.ascontiguousarray(frames), (x, y)
+
+
+def targets(clip: Clip) -> tuple[int, float, float]:
+    """(label index or −1, agent 1/0/−1, object 1/0/−1); −1 = no target."""
+    label = PRIMITIVES.index(clip.label) if clip.label else -1
+    as_t = {None: -1.0, True: 1.0, False: 0.0}
+    return label, as_t[clip.agent], as_t[clip.object]
+
+
+def batch_of(clips: list[Clip], rng: np.random.Generator | None) -> tuple[torch.Tensor, torch.Tensor]:
+    xs, ys = [], []
+    for c in clips:
+        frames, px = augment(c, rng) if rng is not None else (c.judge_frames(), c.object_px)
+        xs.append(judge_input(frames, px)[0])
+        ys.append(targets(c))
+    return torch.from_numpy(np.stack(xs)), torch.tensor(ys, dtype=torch.float32)
+
+
+def loss_of(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    label, agent, obj = y[:, 0].long(), y[:, 1], y[:, 2]
+    n = len(PRIMITIVES)
+    loss = torch.zeros(())
+    if (label >= 0).any():
+        loss = loss + nn.functional.cross_entropy(out[label >= 0, :n], label[label >= 0])
+    for k, t in ((n, agent), (n + 1, obj)):
+        m = t >= 0
+        if m.any():
+            loss = loss + nn.functional.binary_cross_entropy_with_logits(out[m, k], t[m])
+    return loss
+
+
+def release_digest(release: Path) -> str:
+    return hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()
+
+
+def load_clips(releases: list[Path]) -> list[Clip]:
+    clips = []
+    for release in releases:
+        meta = json.loads((release / RELEASE_JSON).read_text())
+        for config, info in sorted(meta["configs"].items()):
+            if not config.startswith("t5_"):
+                continue
+            seed_range = info["build_config"].get("seed_range")
+            if seed_range != "train":
+                sys.exit(f"{release}/{config}: built on the {seed_range or 't5'} seed range; the judge trains on "
+                         "training-range seeds only (`wsp build --seed-range train`)")
+            found = t5_clips(release, config)
+            print(f"{release}/{config}: {len(found)} clips", flush=True)
+            clips += found
+    return clips
+
+
+def evaluate(model: nn.Module, clips: list[Clip]) -> dict:
+    model.eval()
+    right = {"label": [0, 0], "agent": [0, 0], "object": [0, 0]}
+    with torch.no_grad():
+        for i in range(0, len(clips), BATCH):
+            x, y = batch_of(clips[i:i + BATCH], None)
+            out = model(x)
+            n = len(PRIMITIVES)
+            for j in range(len(y)):
+                if y[j, 0] >= 0:
+                    right["label"][0] += int(out[j, :n].argmax() == y[j, 0])
+                    right["label"][1] += 1
+                for name, k, t in (("agent", n, y[j, 1]), ("object", n + 1, y[j, 2])):
+                    if t >= 0:
+                        right[name][0] += int((out[j, k] > 0) == (t > 0.5))
+                        right[name][1] += 1
+    return {k: f"{a}/{b}" for k, (a, b) in right.items()}
+
+
+def export(model: nn.Module, path: Path, probe: list[Clip]) -> float:
+    """ONNX export; the largest |torch − OpenCV dnn| output difference on `probe`."""
+    model.eval()
+    x, _ = batch_of(probe, None)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.onnx.export(model, (x[:1],), str(path), dynamo=False, opset_version=13, input_names=["clip"],
+                      output_names=["logits"])
+    net = cv2.dnn.readNetFromONNX(str(path))
+    worst = 0.0
+    with torch.no_grad():
+        for i in range(len(x)):
+            net.setInput(x[i:i + 1].numpy())
+            worst = max(worst, float(np.abs(net.forward().reshape(-1) - model(x[i:i + 1]).numpy().reshape(-1)).max()))
+    return worst
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("releases", type=Path, nargs="+", help="releases holding t5 configs built with --seed-range train")
+    ap.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
+    ap.add_argument("--epochs", type=int, default=EPOCHS)
+    args = ap.parse_args()
+    torch.manual_seed(SEED)
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)
+    cv2.setNumThreads(1)
+    clips = load_clips(args.releases)
+    if not clips:
+        sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
+    model = JudgeNet()
+    opt = torch.optim.AdamW(model.parameters(), lr=LR, weight_decay=WEIGHT_DECAY)
+    steps = args.epochs * ((len(clips) + BATCH - 1) // BATCH)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=LR, total_steps=steps)
+    rng = np.random.default_rng(SEED)
+    history, start = [], time.perf_counter()
+    for epoch in range(args.epochs):
+        model.train()
+        order = rng.permutation(len(clips))
+        total = 0.0
+        for i in range(0, len(order), BATCH):
+            x, y = batch_of([clips[k] for k in order[i:i + BATCH]], rng)
+            loss = loss_of(model(x), y)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            total += float(loss) * len(y)
+        history.append(total / len(clips))
+        print(f"epoch {epoch + 1}/{args.epochs}: loss {history[-1]:.4f} ({time.perf_counter() - start:.0f} s)",
+              flush=True)
+    train_acc = evaluate(model, clips)
+    worst = export(model, args.out, clips[:16])
+    record = {
+        "weights": args.out.name, "sha256": hashlib.sha256(args.out.read_bytes()).hexdigest(),
+        "data": [{"release": str(r), "release_json_sha256": release_digest(r)} for r in args.releases],
+        "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
+        "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
+        "epochs": args.epochs, "batch": BATCH, "lr": LR, "weight_decay": WEIGHT_DECAY, "seed": SEED,
+        "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
+        "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),
+        "torch": torch.__version__, "opencv": cv2.__version__,
+    }
+    args.out.with_suffix(".json").write_text(json.dumps(record, indent=1))
+    print(json.dumps({k: record[k] for k in ("clips", "train_accuracy_unaugmented", "onnx_vs_torch_max_abs_diff",
+                                             "seconds")}))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,115 @@
+"""Simulator-labelled clips for training and validating a T5 judge, from a release's T5 configs (and T4's).
+
+Every clip is what a judge sees (`JUDGE_FRAMES` frames and the frame-0 object position) plus what the
+simulator says it shows. Kinds (`Clip.kind`) and their targets (label, agent_ok, object_ok; None = no target):
+
+| kind | frames | label | agent | object |
+|---|---|---|---|---|
+| `reference` | the T5 reference, sampled as `sample_frames` does | its primitive | True | True |
+| `static` | frame 0 repeated | None | False | False |
+| `approach` | the reference up to the first contact: the robot moves, the object has not moved | None | None | False |
+| `no_robot` | the reference with the robot held at its frame-0 pose (robot mask pixels of frame t replaced by a background estimate, frame 0's robot pasted back): the object moves with no robot near it | None | False | None |
+| `t4` | a T4 reference (false contact or spatial proximity: the evaluated object never moves) | None | None | False |
+
+`dense` keeps `DENSE` frames sampled uniformly (so training can jitter the 12 it takes); `judge_frames`
+takes the 12 a judge sees.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from wsp_eval.backends.judge import JUDGE_FRAMES, frame_indices
+from wsp_eval.release_format import INSTANCES
+from wsp_eval.suites.reference import InstanceReference
+
+DENSE = 2 * JUDGE_FRAMES
+KINDS = ("reference", "static", "approach", "no_robot", "t4")
+TARGETS = {"static": (None, False, False), "approach": (None, None, False), "no_robot": (None, False, None),
+           "t4": (None, None, False)}
+T4_STILL = ("false_contact", "spatial_proximity")
+MIN_APPROACH = 6  # frames before first contact needed for an approach clip
+
+
+@dataclass
+class Clip:
+    kind: str
+    config: str
+    instance_id: str
+    task: str
+    seed: int
+    dense: np.ndarray = field(repr=False)  # (DENSE, H, W, 3) uint8
+    object_px: tuple[float, float]  # frame-0 (x, y) in the 256² scoring frame
+    label: str | None
+    agent: bool | None
+    object: bool | None
+    primitive: str | None = None  # the T5 instance's intended primitive, whatever the kind (None for T4)
+
+    def judge_frames(self) -> np.ndarray:
+        return self.dense[frame_indices(len(self.dense), JUDGE_FRAMES)]
+
+
+def _dense(frames: np.ndarray) -> np.ndarray:
+    return np.asarray(frames)[frame_indices(len(frames), DENSE)]
+
+
+def without_robot(frames: np.ndarray, masks: np.ndarray) -> np.ndarray:
+    """The clip with the robot held at its frame-0 pose: robot pixels of each frame replaced by a background
+    estimate (frame 0, or the last frame where frame 0 shows the robot), then frame 0's robot pasted back."""
+    robot = masks > 0
+    background = frames[0].copy()
+    hole = robot[0] & ~robot[-1]
+    background[hole] = frames[-1][hole]
+    out = frames.copy()
+    for t in range(len(frames)):
+        out[t][robot[t]] = background[robot[t]]
+        out[t][robot[0]] = frames[0][robot[0]]
+    return out
+
+
+def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = KINDS[:4], limit: int | None = None) -> list[Clip]:
+    """The clips of every instance of a T5 config."""
+    config_dir = Path(release) / config
+    rows = pq.read_table(config_dir / INSTANCES).to_pylist()[:limit]
+    out = []
+    for row in rows:
+        ref = InstanceReference(config_dir, row)
+        frames = ref.frames("reference")
+        px = (float(row["object_pixel_256"][0]), float(row["object_pixel_256"][1]))
+        base = dict(config=config, instance_id=row["instance_id"], task=row["task"], seed=int(row["seed"]),
+                    object_px=px, primitive=row["primitive"])
+        if "reference" in kinds:
+            out.append(Clip("reference", dense=_dense(frames), label=row["primitive"], agent=True, object=True,
+                            **base))
+        if "static" in kinds:
+            out.append(Clip("static", dense=np.repeat(frames[:1], DENSE, axis=0), label=None, agent=False,
+                            object=False, **base))
+        contact = int(row["first_contact_step"])
+        if "approach" in kinds and contact >= MIN_APPROACH:
+            out.append(Clip("approach", dense=_dense(frames[:contact]), label=None, agent=None, object=False,
+                            **base))
+        if "no_robot" in kinds:
+            idx = frame_indices(len(frames), DENSE)
+            dense = without_robot(frames[idx], ref.masks("reference")[idx])
+            out.append(Clip("no_robot", dense=dense, label=None, agent=False, object=None, **base))
+    return out
+
+
+def t4_clips(release: Path, config: str, limit: int | None = None) -> list[Clip]:
+    """T4 references where the evaluated object never moves (false contact, spatial proximity)."""
+    config_dir = Path(release) / config
+    out = []
+    for row in pq.read_table(config_dir / INSTANCES).to_pylist():
+        if row["kind"] not in T4_STILL:
+            continue
+        frames = InstanceReference(config_dir, row).frames("reference")
+        out.append(Clip("t4", config=config, instance_id=row["instance_id"], task=row["task"], seed=int(row["seed"]),
+                        dense=_dense(frames), object_px=tuple(float(v) for v in row["object_pixel_256"]),
+                        label=None, agent=None, object=False))
+        if limit is not None and len(out) >= limit:
+            break
+    return out
