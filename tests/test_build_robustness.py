@@ -112,3 +112,19 @@ def test_corrupt_release_json_names_the_file(tmp_path):
 def test_info_on_non_release_is_a_clear_error(tmp_path):
     r = _wsp("info", str(tmp_path))
     assert r.returncode == 2 and "not a WorldSimProbe release" in r.stderr
+
+
+def test_seed_range_draws_scene_seeds_from_another_suites_range():
+    """`--seed-range train` (judge-training data): slot k, attempt a gets the training range's seed; the field is
+    left out of the config JSON when unset, so configs written before it existed compare equal."""
+    from wsp_data.builders.base import BuildConfig
+    from wsp_data.schema import SEED_BASE, scene_seed
+
+    plain = BuildConfig("t5", "maniskill", 8, ("PickCube",))
+    train = BuildConfig("t5", "maniskill", 8, ("PickCube",), seed_range="train")
+    assert plain.scene_suite == "t5" and "seed_range" not in plain.to_json()
+    assert train.scene_suite == "train" and train.to_json()["seed_range"] == "train"
+    assert BuildConfig.from_json(train.to_json()) == train and BuildConfig.from_json(plain.to_json()) == plain
+    assert scene_seed(train.scene_suite, 3, 1) == SEED_BASE["train"] + 301
+    with pytest.raises(ValueError, match="unknown seed range 'test'"):
+        BuildConfig("t5", "maniskill", 8, ("PickCube",), seed_range="test")

@@ -1,0 +1,112 @@
+"""The T4 tracker against simulator ground truth (docs/validity.md §2): the evaluated object's true image
+position in every frame is its stored pose projected through the stored camera, so what the tracker reports can
+be checked on references whose object moves (T5) and on references whose object stays (T4).
+
+    .venv/bin/python benchmarks/tracker_validity.py RELEASE [RELEASE ...] [--out FILE.json]
+
+Per platform:
+- moving objects (T5 references, and T4 source rollouts — the unperturbed expert, which often grasps and
+  carries the evaluated object — whose true displacement exceeds 10 px in the 256² scoring frame): detection =
+  the tracker's d > 10 px (what T4 uses), and d > 10 px *or* a visible fraction under half the frames (T4's
+  tracking-failure rule, with the reference's own visibility taken as 1);
+- still objects (T4 references of any kind, and any rollout whose true displacement is ≤ 10 px): false alarm =
+  d > 10 px;
+- centroid error: per visible frame, |tracked displacement − true displacement| (px; both from frame 0, so the
+  grid centroid's offset from the projected centre cancels), median and 90th percentile over frames;
+- the motion gate on a static video (frame 0 repeated): g ≥ 0.5·g_ref would pass it (must never happen).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from wsp_eval.reference import episodes, reference_frames
+from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, RELEASE_JSON
+from wsp_eval.suites.reference import InstanceReference
+from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, centroid_path, motion_gate, project, query_grid,
+                               scoring_frames, track)
+
+POSES = "observation.object_poses"
+
+
+def object_poses(config_dir: Path, episode_index: int) -> np.ndarray:
+    """(T, MAX_OBJECTS, 7) poses of one episode."""
+    ep = episodes(config_dir)[episode_index]
+    lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
+    rows = []
+    for path in sorted((config_dir / "data").glob("*/*.parquet")):
+        t = pq.read_table(path, columns=["index", POSES], filters=[("index", ">=", lo), ("index", "<", hi)])
+        rows += t.sort_by("index").column(POSES).to_pylist()
+    return np.asarray(rows, np.float64).reshape(len(rows), -1, 7)
+
+
+def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference") -> dict:
+    """The tracker on one rollout of an instance (`role`: reference, or the unperturbed source rollout)."""
+    ref = InstanceReference(config_dir, row)
+    episode = ref.episode("reference") if role == "reference" else int(row["source_episode_index"])
+    frames = ref.frames("reference") if role == "reference" else reference_frames(config_dir, episode)
+    poses = object_poses(config_dir, episode)[:, evaluated]
+    if not np.isfinite(poses).all():  # the object is not in this rollout (a distractor added to the reference)
+        return {}
+    truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE) for p in poses])
+    grey = scoring_frames(frames)
+    tracks = track(grey, query_grid(np.asarray(row["object_pixel_256"])), anchored=True)
+    path = centroid_path(tracks, anchored=True)
+    visible = tracks.visible.any(axis=1)
+    d = float(np.linalg.norm(path - path[0], axis=1).max())
+    err = np.linalg.norm((path - path[0]) - (truth - truth[0]), axis=1)[visible]
+    out = {"instance_id": row["instance_id"], "role": role, "task": row["task"], "true_d": float(np.linalg.norm(truth - truth[0], axis=1).max()),
+           "d": d, "visible_fraction": float(visible.mean()), "errors": err.tolist()}
+    if "gate_reference" in row and role == "reference":
+        static = np.repeat(grey[:1], len(grey), axis=0)
+        out["static_gate_passes"] = bool(motion_gate(static, ref.masks("reference")[0]) >= GATE_RATIO * row["gate_reference"])
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("releases", type=Path, nargs="+")
+    ap.add_argument("--out", type=Path)
+    args = ap.parse_args()
+    import cv2
+
+    cv2.setNumThreads(1)
+    records: dict[str, list[dict]] = defaultdict(list)
+    for release in args.releases:
+        for config in sorted(json.loads((release / RELEASE_JSON).read_text())["configs"]):
+            suite, platform = config.split("_", 1)
+            if suite not in ("t4", "t5"):
+                continue
+            for row in pq.read_table(release / config / INSTANCES).to_pylist():
+                ev = row["evaluated_index"] if suite == "t5" else row["evaluated_object_index"]
+                roles = ("reference", "source") if suite == "t4" and row.get("source_episode_index") is not None \
+                    else ("reference",)  # a T4 source rollout: the expert, which often carries the object away
+                for role in roles:
+                    if found := measure(release / config, row, int(ev), role):
+                        records[platform].append({"suite": suite, **found})
+    print("| platform | moving (true d > 10 px) | detected: d > 10 | detected: d > 10 or lost | still (true d ≤ 10) "
+          "| false alarms: d > 10 | centroid error median / p90 px | static video passes the gate |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for platform, recs in sorted(records.items()):
+        moving = [r for r in recs if r["true_d"] > MOTION_MAX]
+        still = [r for r in recs if r["true_d"] <= MOTION_MAX]
+        det = sum(r["d"] > MOTION_MAX for r in moving)
+        det_lost = sum(r["d"] > MOTION_MAX or r["visible_fraction"] < TRACKED_RATIO for r in moving)
+        fa = sum(r["d"] > MOTION_MAX for r in still)
+        errs = np.concatenate([r["errors"] for r in recs if r["errors"]]) if recs else np.zeros(0)
+        gates = [r["static_gate_passes"] for r in recs if "static_gate_passes" in r]
+        print(f"| {platform} | {len(moving)} | {det} ({100 * det / max(len(moving), 1):.0f} %) | {det_lost} "
+              f"({100 * det_lost / max(len(moving), 1):.0f} %) | {len(still)} | {fa} ({100 * fa / max(len(still), 1):.0f} %) "
+              f"| {np.median(errs):.1f} / {np.percentile(errs, 90):.1f} | {sum(gates)} / {len(gates)} |")
+    if args.out:
+        args.out.write_text(json.dumps(records, indent=1))
+
+
+if __name__ == "__main__":
+    main()
