@@ -6,8 +6,8 @@ owes (SPEC §3 T5, docs/judge.md), on a release built on test seeds the judge ne
 Per platform (each `t5_<platform>` config; `t4_<platform>` configs add the still-object references):
 - agreement: label = intended primitive; full: the reference scores 100 (label, agent_ok and object_ok);
 - static: frame 0 repeated must score 0 against its intended primitive;
-- approach (the reference before first contact) and T4 false-contact / spatial-proximity references: the object
-  never moves, so never accepted (label, agent_ok and object_ok) as push, pull, drag, tap, knock-over or drop;
+- approach (the reference before first contact) and T4 references (distractor, false contact, spatial
+  proximity): the object never moves, so never accepted (label, agent_ok and object_ok) as push, pull, drag, tap, knock-over or drop;
 - no_robot (the object moves, the robot held at its frame-0 pose): agent_ok must be False;
 - degraded references (JPEG q 40, Gaussian blur σ 1, 64×64 and back): full agreement, as for the originals.
 Prints Markdown tables; `--out` keeps every verdict.
@@ -80,6 +80,9 @@ def summarize(records: list[dict]) -> dict:
     accepted_moving = lambda r: r["label"] in MOVING and r["agent_ok"] and r["object_ok"]  # noqa: E731
     s["approach_accepted_moving"] = rate("approach", accepted_moving)
     s["t4_accepted_moving"] = rate("t4", accepted_moving)
+    for kind in sorted({r["intended"] for r in records if r["kind"] == "t4"}):
+        mine = [r for r in records if r["kind"] == "t4" and r["intended"] == kind]
+        s[f"t4 {kind} accepted_moving"] = (sum(map(accepted_moving, mine)), len(mine))
     s["no_robot_agent_ok"] = rate("no_robot", lambda r: r["agent_ok"])
     for k in DEGRADE:
         s[f"full, {k}"] = rate(f"reference, {k}", lambda r: r["label"] == r["intended"] and r["agent_ok"]
@@ -104,6 +107,7 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
               f"| static (frame 0 repeated) scores > 0 | {'%d / %d' % s['static_nonzero']} | 0 |",
               f"| approach before contact accepted as a moving primitive | {'%d / %d' % s['approach_accepted_moving']} | 0 |",
               f"| T4 still-object reference accepted as a moving primitive | {'%d / %d' % s['t4_accepted_moving']} | 0 |",
+              *(f"| … T4 {k.split()[1]} | {'%d / %d' % v} | 0 |" for k, v in s.items() if k.startswith("t4 ")),
               f"| object moves, robot held still: agent_ok | {'%d / %d' % s['no_robot_agent_ok']} | 0 |"]
     for k in DEGRADE:
         good, n = s[f"full, {k}"]

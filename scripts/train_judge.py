@@ -4,11 +4,13 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
     # the data: T5 references on training-range seeds (never a test seed), one config per platform
     wsp build --platform maniskill --suite t5 --seed-range train --count 128 --out judge-train
     wsp build --platform libero    --suite t5 --seed-range train --count 48  --out judge-train
+    wsp build --platform maniskill --suite t4 --seed-range train --count 32  --out judge-train
+    wsp build --platform libero    --suite t4 --seed-range train --count 12  --out judge-train
     .venv/bin/python scripts/train_judge.py judge-train --out wsp_eval/backends/weights/judge_net_v1.onnx
 
-Clips (`wsp_eval.judge_data`): every reference (label, agent and object true), frame 0 repeated (both false),
-the approach before first contact (object false) and the robot held still while the object moves (agent
-false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
+Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
+the approach before first contact (object false), the robot held still while the object moves (agent false),
+and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
 gain/offset, left–right mirroring, jittered frame sampling with repeated frames, a shifted object position.
 Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.
 The training record (data checksums, counts, epochs, losses, train accuracy) is written beside the weights.
@@ -30,7 +32,7 @@ from torch import nn
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
 from wsp_eval.backends.judge_net import CHANNELS, judge_input
-from wsp_eval.judge_data import DENSE, Clip, t5_clips
+from wsp_eval.judge_data import DENSE, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 30, 32, 2e-3, 1e-4, 0
@@ -67,7 +69,7 @@ def augment(clip: Clip, rng: np.random.Generator) -> tuple[np.ndarray, tuple[flo
     x, y = x + rng.normal(0, 2), y + rng.normal(0, 2)
     if rng.random() < 0.5:
         frames = frames[:, :, ::-1]
-        x = 256.0 - x
+        x = 255.0 - x  # pixel centres at integers in the 256² frame
     gain = rng.uniform(0.85, 1.15) * rng.uniform(0.93, 1.07, 3)
     frames = np.clip(frames * gain + rng.uniform(-15, 15), 0, 255).astype(np.uint8)
     h, w = frames.shape[1:3]
@@ -115,8 +117,12 @@ def loss_of(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     return loss
 
 
-def release_digest(release: Path) -> str:
-    return hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()
+def data_record(release: Path) -> dict:
+    meta = json.loads((release / RELEASE_JSON).read_text())
+    t5 = {c: i["build_config"] for c, i in sorted(meta["configs"].items()) if c.split("_", 1)[0] in ("t4", "t5")}
+    return {"release": release.name, "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest(),
+            "configs": {c: {k: b[k] for k in ("count", "seed", "tasks")} for c, b in t5.items()},
+            "seed_range": sorted({b.get("seed_range", "") for b in t5.values()})}
 
 
 def load_clips(releases: list[Path]) -> list[Clip]:
@@ -124,13 +130,14 @@ def load_clips(releases: list[Path]) -> list[Clip]:
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())
         for config, info in sorted(meta["configs"].items()):
-            if not config.startswith("t5_"):
+            suite = config.split("_", 1)[0]
+            if suite not in ("t4", "t5"):
                 continue
             seed_range = info["build_config"].get("seed_range")
             if seed_range != "train":
-                sys.exit(f"{release}/{config}: built on the {seed_range or 't5'} seed range; the judge trains on "
+                sys.exit(f"{release}/{config}: built on the {seed_range or suite} seed range; the judge trains on "
                          "training-range seeds only (`wsp build --seed-range train`)")
-            found = t5_clips(release, config)
+            found = t5_clips(release, config) if suite == "t5" else t4_clips(release, config)
             print(f"{release}/{config}: {len(found)} clips", flush=True)
             clips += found
     return clips
@@ -176,6 +183,10 @@ def main() -> None:
     ap.add_argument("releases", type=Path, nargs="+", help="releases holding t5 configs built with --seed-range train")
     ap.add_argument("--out", type=Path, required=True, help="the .onnx file to write")
     ap.add_argument("--epochs", type=int, default=EPOCHS)
+    ap.add_argument("--holdout", type=int, default=0, metavar="K",
+                    help="development only: hold out every K-th run of 8 consecutive slots (all primitives; training-range "
+                         "seeds still) and print its "
+                         "accuracy every 5 epochs; the shipped judge trains on every clip (K = 0)")
     args = ap.parse_args()
     torch.manual_seed(SEED)
     torch.set_num_threads(1)
@@ -184,6 +195,11 @@ def main() -> None:
     clips = load_clips(args.releases)
     if not clips:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
+    held: list[Clip] = []
+    if args.holdout:
+        out_of = {c.instance_id for c in clips if int(c.instance_id.rsplit("/", 1)[1]) // 8 % args.holdout == 0}
+        held = [c for c in clips if c.instance_id in out_of]
+        clips = [c for c in clips if c.instance_id not in out_of]
     model = JudgeNet()
     opt = torch.optim.AdamW(model.parameters(), lr=LR, weight_decay=WEIGHT_DECAY)
     steps = args.epochs * ((len(clips) + BATCH - 1) // BATCH)
@@ -205,11 +221,13 @@ def main() -> None:
         history.append(total / len(clips))
         print(f"epoch {epoch + 1}/{args.epochs}: loss {history[-1]:.4f} ({time.perf_counter() - start:.0f} s)",
               flush=True)
+        if held and (epoch + 1) % 5 == 0:
+            print(f"  held out: {evaluate(model, held)}", flush=True)
     train_acc = evaluate(model, clips)
     worst = export(model, args.out, clips[:16])
     record = {
         "weights": args.out.name, "sha256": hashlib.sha256(args.out.read_bytes()).hexdigest(),
-        "data": [{"release": str(r), "release_json_sha256": release_digest(r)} for r in args.releases],
+        "data": [data_record(r) for r in args.releases],
         "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
         "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
         "epochs": args.epochs, "batch": BATCH, "lr": LR, "weight_decay": WEIGHT_DECAY, "seed": SEED,

@@ -13,7 +13,7 @@ from wsp_eval.backends.errors import BackendUnavailable
 
 
 def test_defaults_are_registered_and_offline():
-    assert {"dis", "dpflow"} <= set(FLOW) and {"lk", "tapnext"} <= set(TRACKER) and {"rules", "openai"} <= set(JUDGE)
+    assert {"dis", "dpflow"} <= set(FLOW) and {"lk", "tapnext"} <= set(TRACKER) and {"net", "rules", "openai"} <= set(JUDGE)
     b = make(BackendSpec(), ("flow", "tracker"))
     assert (b.flow.name, b.tracker.name, b.judge) == ("dis", "lk", None)
     assert set(b.describe()) == {"flow", "tracker"} and "opencv" in b.describe()["flow"]["version"]
@@ -25,6 +25,7 @@ def test_defaults_are_registered_and_offline():
     (BackendSpec(tracker="tapnext"), "needs a local checkpoint: --tracker-checkpoint"),
     (BackendSpec(tracker="tapnext", tracker_checkpoint="/nonexistent/t.npz"), "/nonexistent/t.npz not found"),
     (BackendSpec(judge="openai"), "needs --judge-url"),
+    (BackendSpec(judge="net", judge_checkpoint="/nonexistent/judge.onnx"), "weights not found at /nonexistent/judge.onnx"),
 ])
 def test_missing_weights_or_endpoint_fail_clearly(spec, message):
     with pytest.raises(BackendUnavailable, match=message):

@@ -130,7 +130,7 @@ def _score_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--flow-checkpoint", help="local checkpoint for --flow dpflow")
     p.add_argument("--tracker", choices=TRACKER, default="lk")
     p.add_argument("--tracker-checkpoint", help="local checkpoint for --tracker tapnext")
-    p.add_argument("--judge", choices=JUDGE, default="rules")
+    p.add_argument("--judge", choices=JUDGE, default="net")
     p.add_argument("--judge-checkpoint", help="ONNX weights for --judge net (default: the packaged ones)")
     p.add_argument("--judge-url", help="OpenAI-compatible endpoint for --judge openai (e.g. http://127.0.0.1:8000/v1)")
     p.add_argument("--judge-model", help="model name served there (e.g. Qwen/Qwen3-VL-8B-Instruct)")

@@ -9,7 +9,7 @@ simulator says it shows. Kinds (`Clip.kind`) and their targets (label, agent_ok,
 | `static` | frame 0 repeated | None | False | False |
 | `approach` | the reference up to the first contact: the robot moves, the object has not moved | None | None | False |
 | `no_robot` | the reference with the robot held at its frame-0 pose (robot mask pixels of frame t replaced by a background estimate, frame 0's robot pasted back): the object moves with no robot near it | None | False | None |
-| `t4` | a T4 reference (false contact or spatial proximity: the evaluated object never moves) | None | None | False |
+| `t4` | a T4 reference (distractor, false contact, spatial proximity: the evaluated object never moves) | None | None | False |
 
 `dense` keeps `DENSE` frames sampled uniformly (so training can jitter the 12 it takes); `judge_frames`
 takes the 12 a judge sees.
@@ -31,7 +31,6 @@ DENSE = 2 * JUDGE_FRAMES
 KINDS = ("reference", "static", "approach", "no_robot", "t4")
 TARGETS = {"static": (None, False, False), "approach": (None, None, False), "no_robot": (None, False, None),
            "t4": (None, None, False)}
-T4_STILL = ("false_contact", "spatial_proximity")
 MIN_APPROACH = 6  # frames before first contact needed for an approach clip
 
 
@@ -47,7 +46,7 @@ class Clip:
     label: str | None
     agent: bool | None
     object: bool | None
-    primitive: str | None = None  # the T5 instance's intended primitive, whatever the kind (None for T4)
+    primitive: str | None = None  # the T5 instance's intended primitive, whatever the kind (T4: its kind)
 
     def judge_frames(self) -> np.ndarray:
         return self.dense[frame_indices(len(self.dense), JUDGE_FRAMES)]
@@ -100,16 +99,14 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = KINDS[:4], lim
 
 
 def t4_clips(release: Path, config: str, limit: int | None = None) -> list[Clip]:
-    """T4 references where the evaluated object never moves (false contact, spatial proximity)."""
+    """T4 references: in every kind the evaluated object never moves (the builder checks it from state)."""
     config_dir = Path(release) / config
     out = []
     for row in pq.read_table(config_dir / INSTANCES).to_pylist():
-        if row["kind"] not in T4_STILL:
-            continue
         frames = InstanceReference(config_dir, row).frames("reference")
         out.append(Clip("t4", config=config, instance_id=row["instance_id"], task=row["task"], seed=int(row["seed"]),
                         dense=_dense(frames), object_px=tuple(float(v) for v in row["object_pixel_256"]),
-                        label=None, agent=None, object=False))
+                        label=None, agent=None, object=False, primitive=row["kind"]))
         if limit is not None and len(out) >= limit:
             break
     return out

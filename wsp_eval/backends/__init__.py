@@ -4,7 +4,8 @@ entry is a factory `(BackendSpec) -> backend`; other distributions add some thro
 
     flow      dis (default, OpenCV DIS)        dpflow (ptlflow, local checkpoint)
     tracker   lk (default, OpenCV LK + FB)     tapnext (tapnet, local checkpoint)
-    judge     rules (default, deterministic)   openai (any OpenAI-compatible VLM endpoint, e.g. Qwen3-VL)
+    judge     net (default, learned, ONNX on    rules (deterministic hand rules, the former default)
+              OpenCV dnn; weights packaged)   openai (any OpenAI-compatible VLM endpoint, e.g. Qwen3-VL)
 
 `BackendSpec` names a choice (and its checkpoint or endpoint) and is what worker processes receive;
 `make` builds the backends from it, raising `BackendUnavailable` with a clear message when a package, a
@@ -87,7 +88,7 @@ class BackendSpec:
 
     flow: str = "dis"
     tracker: str = "lk"
-    judge: str = "rules"
+    judge: str = "net"
     flow_checkpoint: str | None = None
     tracker_checkpoint: str | None = None
     judge_url: str | None = None

@@ -7,12 +7,15 @@ It sees what SPEC §3 T5 lets a judge see: the 12 sampled frames and the evaluat
 
 - every frame resized to 128×128 (the references' size), RGB in [0, 1];
 - a *global* view: the whole frame at 64×64; a *local* view: the 64×64 window of the 128×128 frame centred
-  on the object's frame-0 position (borders replicated);
+  on the object's frame-0 position (borders replicated); a *zoom* view: the 32×32 window there, enlarged 2×
+  (objects are 4–8 px wide at 128×128 and their motion is a few px);
 - per view, frame 0 (3 channels) then frames 1–11 minus frame 0 (33 channels), so motion is explicit;
 - one channel marking the object's frame-0 position in the global view (a Gaussian, σ = 2 px).
 
-Outputs: 8 label logits (`PRIMITIVES` order), then the agent and object logits; a boolean is true when its
-probability is ≥ 0.5. Deterministic: OpenCV's dnn on one thread, fixed preprocessing.
+Outputs: 8 label logits (`PRIMITIVES` order), then the agent and object logits. The judge averages the logits of
+the clip and of its left–right mirror (every primitive is mirror-symmetric; training mirrors too), takes the
+most likely primitive, and a boolean is true when its probability is ≥ 0.5. Deterministic: OpenCV's dnn on one
+thread, fixed preprocessing.
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 NAME, VERSION = "net", "1"
 WEIGHTS = Path(__file__).with_name("weights") / f"judge_net_v{VERSION}.onnx"
 FRAME, SIDE = 128, 64
-CHANNELS = 2 * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
+VIEWS = 3
+CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
 MARK_SIGMA = 2.0
 
 
@@ -47,8 +51,10 @@ def judge_input(frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarra
     cx, cy = (float(v) * FRAME / 256.0 for v in object_px)
     glob = np.stack([cv2.resize(f, (SIDE, SIDE), interpolation=cv2.INTER_AREA) for f in full])
     local = np.stack([cv2.getRectSubPix(f, (SIDE, SIDE), (cx, cy)) for f in full])
+    zoom = np.stack([cv2.resize(cv2.getRectSubPix(f, (SIDE // 2, SIDE // 2), (cx, cy)), (SIDE, SIDE),
+                                interpolation=cv2.INTER_LINEAR) for f in full])
     parts = []
-    for view in (glob, local):
+    for view in (glob, local, zoom):
         v = view.astype(np.float32) / 255.0
         parts += [v[0], (v[1:] - v[:1]).transpose(1, 2, 0, 3).reshape(SIDE, SIDE, -1)]
     yy, xx = np.mgrid[0:SIDE, 0:SIDE].astype(np.float32)
@@ -96,11 +102,16 @@ class NetJudge:
 
         cv2.setNumThreads(1)
         net = _net(str(self.path))
-        net.setInput(judge_input(frames, object_px))
-        return np.asarray(net.forward()).reshape(-1)
+        frames = np.asarray(frames)
+        mirrored = (frames[:, :, ::-1], (255.0 - float(object_px[0]), float(object_px[1])))  # pixel centres at integers
+        out = []
+        for f, px in ((frames, object_px), mirrored):
+            net.setInput(judge_input(f, px))
+            out.append(np.asarray(net.forward()).reshape(-1))
+        return np.mean(out, axis=0)
 
     def judge(self, frames: np.ndarray, object_px: tuple[float, float]) -> Verdict:
         try:
             return verdict_of(self.logits(frames, object_px))
-        except (ValueError, TypeError) as e:  # an unreadable clip scores 0, never raises (the contract)
+        except Exception as e:  # noqa: BLE001 - an unreadable clip scores 0; a judge never raises (the contract)
             return Verdict(None, False, False, {"reason": f"{type(e).__name__}: {e}"})
