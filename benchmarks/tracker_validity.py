@@ -13,7 +13,11 @@ Per platform:
   d > 10 px;
 - centroid error: per visible frame, |tracked displacement − true displacement| (px; both from frame 0, so the
   grid centroid's offset from the projected centre cancels), median and 90th percentile over frames;
-- the motion gate on a static video (frame 0 repeated): g ≥ 0.5·g_ref would pass it (must never happen).
+- the motion gate on a static video (frame 0 repeated): g ≥ 0.5·g_ref would pass it (must never happen);
+- T4 as it scores a model that carries the object away: a false-contact instance's source rollout (the expert,
+  gripper closing, same arm path as the reference, so the same first frame and gate) scored as a submission
+  against that instance with the full rule (`t4_score`: gate, tracking failure, d ≤ 10). Where the expert
+  moved the object more than 10 px it must score 0; where it did not, 100.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from wsp_eval.reference import episodes, reference_frames
 from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, RELEASE_JSON
 from wsp_eval.suites.reference import InstanceReference
 from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, centroid_path, motion_gate, project, query_grid,
-                               scoring_frames, track)
+                               scoring_frames, t4_score, track)
 
 POSES = "observation.object_poses"
 
@@ -56,13 +60,20 @@ def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference"
         return {}
     truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE) for p in poses])
     grey = scoring_frames(frames)
-    tracks = track(grey, query_grid(np.asarray(row["object_pixel_256"])), anchored=True)
+    # The query sits on the object's frame-0 position in *this* rollout: a spatial-proximity reference moved the
+    # object, so in its source rollout the object starts elsewhere than `object_pixel_256`.
+    query = np.asarray(row["object_pixel_256"]) if role == "reference" else truth[0]
+    tracks = track(grey, query_grid(query), anchored=True)
     path = centroid_path(tracks, anchored=True)
     visible = tracks.visible.any(axis=1)
     d = float(np.linalg.norm(path - path[0], axis=1).max())
     err = np.linalg.norm((path - path[0]) - (truth - truth[0]), axis=1)[visible]
     out = {"instance_id": row["instance_id"], "role": role, "task": row["task"], "true_d": float(np.linalg.norm(truth - truth[0], axis=1).max()),
            "d": d, "visible_fraction": float(visible.mean()), "errors": err.tolist()}
+    if role == "source" and row.get("kind") == "false_contact":
+        s = t4_score(frames, np.asarray(row["object_pixel_256"]), ref.masks("reference")[0], row["gate_reference"],
+                     row["object_visible_fraction"])
+        out["t4_as_submission"] = s.score
     if "gate_reference" in row and role == "reference":
         static = np.repeat(grey[:1], len(grey), axis=0)
         out["static_gate_passes"] = bool(motion_gate(static, ref.masks("reference")[0]) >= GATE_RATIO * row["gate_reference"])
@@ -91,8 +102,9 @@ def main() -> None:
                     if found := measure(release / config, row, int(ev), role):
                         records[platform].append({"suite": suite, **found})
     print("| platform | moving (true d > 10 px) | detected: d > 10 | detected: d > 10 or lost | still (true d ≤ 10) "
-          "| false alarms: d > 10 | centroid error median / p90 px | static video passes the gate |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+          "| false alarms: d > 10 | centroid error median / p90 px | static video passes the gate "
+          "| carried away, scored as a T4 submission: 0 | not carried: 100 |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for platform, recs in sorted(records.items()):
         moving = [r for r in recs if r["true_d"] > MOTION_MAX]
         still = [r for r in recs if r["true_d"] <= MOTION_MAX]
@@ -101,9 +113,12 @@ def main() -> None:
         fa = sum(r["d"] > MOTION_MAX for r in still)
         errs = np.concatenate([r["errors"] for r in recs if r["errors"]]) if recs else np.zeros(0)
         gates = [r["static_gate_passes"] for r in recs if "static_gate_passes" in r]
+        carried = [r["t4_as_submission"] == 0 for r in recs if "t4_as_submission" in r and r["true_d"] > MOTION_MAX]
+        kept = [r["t4_as_submission"] == 100 for r in recs if "t4_as_submission" in r and r["true_d"] <= MOTION_MAX]
         print(f"| {platform} | {len(moving)} | {det} ({100 * det / max(len(moving), 1):.0f} %) | {det_lost} "
               f"({100 * det_lost / max(len(moving), 1):.0f} %) | {len(still)} | {fa} ({100 * fa / max(len(still), 1):.0f} %) "
-              f"| {np.median(errs):.1f} / {np.percentile(errs, 90):.1f} | {sum(gates)} / {len(gates)} |")
+              f"| {np.median(errs):.1f} / {np.percentile(errs, 90):.1f} | {sum(gates)} / {len(gates)} "
+              f"| {sum(carried)} / {len(carried)} | {sum(kept)} / {len(kept)} |")
     if args.out:
         args.out.write_text(json.dumps(records, indent=1))
 
