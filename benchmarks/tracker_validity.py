@@ -37,6 +37,7 @@ from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, centroid_p
                                scoring_frames, t4_score, track)
 
 POSES = "observation.object_poses"
+IN_VIEW_MARGIN = 12  # px: another object counts when its frame-0 position is this far inside the frame
 
 
 def object_poses(config_dir: Path, episode_index: int) -> np.ndarray:
@@ -50,33 +51,48 @@ def object_poses(config_dir: Path, episode_index: int) -> np.ndarray:
     return np.asarray(rows, np.float64).reshape(len(rows), -1, 7)
 
 
-def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference") -> dict:
-    """The tracker on one rollout of an instance (`role`: reference, or the unperturbed source rollout)."""
+def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference") -> list[dict]:
+    """The tracker on one rollout of an instance (`role`: reference, or the unperturbed source rollout): the
+    evaluated object, and on references every other object in view (never selected by the build, unlike the
+    evaluated one, which the build keeps only when the tracker passes it: an unbiased false-alarm sample)."""
     ref = InstanceReference(config_dir, row)
     episode = ref.episode("reference") if role == "reference" else int(row["source_episode_index"])
     frames = ref.frames("reference") if role == "reference" else reference_frames(config_dir, episode)
-    poses = object_poses(config_dir, episode)[:, evaluated]
-    if not np.isfinite(poses).all():  # the object is not in this rollout (a distractor added to the reference)
-        return {}
-    truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE) for p in poses])
     grey = scoring_frames(frames)
-    # The query sits on the object's frame-0 position in *this* rollout: a spatial-proximity reference moved the
-    # object, so in its source rollout the object starts elsewhere than `object_pixel_256`.
-    query = np.asarray(row["object_pixel_256"]) if role == "reference" else truth[0]
-    tracks = track(grey, query_grid(query), anchored=True)
-    path = centroid_path(tracks, anchored=True)
-    visible = tracks.visible.any(axis=1)
-    d = float(np.linalg.norm(path - path[0], axis=1).max())
-    err = np.linalg.norm((path - path[0]) - (truth - truth[0]), axis=1)[visible]
-    out = {"instance_id": row["instance_id"], "role": role, "task": row["task"], "true_d": float(np.linalg.norm(truth - truth[0], axis=1).max()),
-           "d": d, "visible_fraction": float(visible.mean()), "errors": err.tolist()}
-    if role == "source" and row.get("kind") == "false_contact":
-        s = t4_score(frames, np.asarray(row["object_pixel_256"]), ref.masks("reference")[0], row["gate_reference"],
-                     row["object_visible_fraction"])
-        out["t4_as_submission"] = s.score
-    if "gate_reference" in row and role == "reference":
-        static = np.repeat(grey[:1], len(grey), axis=0)
-        out["static_gate_passes"] = bool(motion_gate(static, ref.masks("reference")[0]) >= GATE_RATIO * row["gate_reference"])
+    all_poses = object_poses(config_dir, episode)
+    out = []
+    for k in range(all_poses.shape[1]) if role == "reference" else (evaluated,):
+        poses = all_poses[:, k]
+        if not np.isfinite(poses).all():  # no such object in this rollout (a distractor added to the reference)
+            continue
+        try:
+            truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE)
+                              for p in poses])
+        except ValueError:  # behind the camera
+            continue
+        if k != evaluated and not ((truth[0] >= IN_VIEW_MARGIN) & (truth[0] <= 255 - IN_VIEW_MARGIN)).all():
+            continue
+        # The query sits on the object's frame-0 position in *this* rollout: a spatial-proximity reference moved
+        # the object, so in its source rollout the object starts elsewhere than `object_pixel_256`.
+        query = np.asarray(row["object_pixel_256"]) if role == "reference" and k == evaluated else truth[0]
+        tracks = track(grey, query_grid(query), anchored=True)
+        path = centroid_path(tracks, anchored=True)
+        visible = tracks.visible.any(axis=1)
+        err = np.linalg.norm((path - path[0]) - (truth - truth[0]), axis=1)[visible]
+        rec = {"instance_id": row["instance_id"], "role": role, "task": row["task"],
+               "object": "evaluated" if k == evaluated else "other",
+               "true_d": float(np.linalg.norm(truth - truth[0], axis=1).max()),
+               "d": float(np.linalg.norm(path - path[0], axis=1).max()), "visible_fraction": float(visible.mean()),
+               "errors": err.tolist()}
+        if k == evaluated and role == "source" and row.get("kind") == "false_contact":
+            s = t4_score(frames, np.asarray(row["object_pixel_256"]), ref.masks("reference")[0],
+                         row["gate_reference"], row["object_visible_fraction"])
+            rec["t4_as_submission"] = s.score
+        if k == evaluated and "gate_reference" in row and role == "reference":
+            static = np.repeat(grey[:1], len(grey), axis=0)
+            rec["static_gate_passes"] = bool(motion_gate(static, ref.masks("reference")[0])
+                                             >= GATE_RATIO * row["gate_reference"])
+        out.append(rec)
     return out
 
 
@@ -99,13 +115,22 @@ def main() -> None:
                 roles = ("reference", "source") if suite == "t4" and row.get("source_episode_index") is not None \
                     else ("reference",)  # a T4 source rollout: the expert, which often carries the object away
                 for role in roles:
-                    if found := measure(release / config, row, int(ev), role):
-                        records[platform].append({"suite": suite, **found})
-    print("| platform | moving (true d > 10 px) | detected: d > 10 | detected: d > 10 or lost | still (true d ≤ 10) "
-          "| false alarms: d > 10 | centroid error median / p90 px | static video passes the gate "
-          "| carried away, scored as a T4 submission: 0 | not carried: 100 |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
-    for platform, recs in sorted(records.items()):
+                    records[platform] += [{"suite": suite, **r} for r in measure(release / config, row, int(ev), role)]
+    print(table(records))
+    if args.out:
+        args.out.write_text(json.dumps(records, indent=1))
+
+
+def table(records: dict[str, list[dict]]) -> str:
+    """One row per platform and object class (the evaluated object; other objects in view of a reference)."""
+    lines = ["| platform | objects | moving (true d > 10 px) | detected: d > 10 | detected: d > 10 or lost "
+             "| still (true d ≤ 10) | false alarms: d > 10 | centroid error median / p90 px "
+             "| static video passes the gate | carried away, scored as a T4 submission: 0 | not carried: 100 |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for (platform, cls), recs in sorted({(p, c): [r for r in rs if r["object"] == c] for p, rs in records.items()
+                                         for c in ("evaluated", "other")}.items()):
+        if not recs:
+            continue
         moving = [r for r in recs if r["true_d"] > MOTION_MAX]
         still = [r for r in recs if r["true_d"] <= MOTION_MAX]
         det = sum(r["d"] > MOTION_MAX for r in moving)
@@ -115,12 +140,11 @@ def main() -> None:
         gates = [r["static_gate_passes"] for r in recs if "static_gate_passes" in r]
         carried = [r["t4_as_submission"] == 0 for r in recs if "t4_as_submission" in r and r["true_d"] > MOTION_MAX]
         kept = [r["t4_as_submission"] == 100 for r in recs if "t4_as_submission" in r and r["true_d"] <= MOTION_MAX]
-        print(f"| {platform} | {len(moving)} | {det} ({100 * det / max(len(moving), 1):.0f} %) | {det_lost} "
-              f"({100 * det_lost / max(len(moving), 1):.0f} %) | {len(still)} | {fa} ({100 * fa / max(len(still), 1):.0f} %) "
-              f"| {np.median(errs):.1f} / {np.percentile(errs, 90):.1f} | {sum(gates)} / {len(gates)} "
-              f"| {sum(carried)} / {len(carried)} | {sum(kept)} / {len(kept)} |")
-    if args.out:
-        args.out.write_text(json.dumps(records, indent=1))
+        pct = lambda k, n: f"{k} ({100 * k / max(n, 1):.0f} %)"  # noqa: E731
+        lines.append(f"| {platform} | {cls} | {len(moving)} | {pct(det, len(moving))} | {pct(det_lost, len(moving))} "
+                     f"| {len(still)} | {pct(fa, len(still))} | {np.median(errs):.1f} / {np.percentile(errs, 90):.1f} "
+                     f"| {sum(gates)} / {len(gates)} | {sum(carried)} / {len(carried)} | {sum(kept)} / {len(kept)} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

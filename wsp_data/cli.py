@@ -9,6 +9,7 @@
     wsp score SUBMISSION --release DIR --out REPORT_DIR              score a submission: JSON, Markdown, HTML
     wsp calibrate --release DIR --out DIR                            every baseline, scored, in one table
     wsp teleop --task T --seed S --operator NAME                     browser teleoperation → source trajectory
+    wsp study corruption --release DIR --out DIR                     RMFA under blur / texture removal (validity)
 """
 
 from __future__ import annotations
@@ -115,6 +116,15 @@ def parser() -> argparse.ArgumentParser:
     t.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0 = any free port)")
     t.add_argument("--step", type=float, default=0.01, help="TCP translation per command, m (default 0.01)")
     t.add_argument("--yaw-step", type=float, default=0.1, help="TCP yaw per command, rad (default 0.1)")
+    st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md)")
+    study = st.add_subparsers(dest="study", required=True)
+    co = study.add_parser("corruption", help="RMFA drop under blur and texture removal, robot region vs background")
+    co.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    co.add_argument("--out", type=Path, required=True, help="folder for corruption.{json,md}, example.png (resumable)")
+    co.add_argument("--config", help="T2 config (default: the release's first, e.g. t2_libero)")
+    co.add_argument("--count", type=_positive, default=50, help="references (default 50, as the paper)")
+    co.add_argument("--seed", type=int, default=0, help="seed of the background regions and the bootstrap")
+    co.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
@@ -299,6 +309,19 @@ def cmd_calibrate(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from wsp_eval.studies import corruption
+
+    try:
+        summary = corruption.run(_release_or_error(args.release), args.out, config=args.config, count=args.count,
+                                 seed=args.seed, progress=not args.quiet)
+    except corruption.StudyError as e:
+        raise CliError(str(e)) from None
+    print(corruption.markdown(summary, summary["config"]))
+    print(f"written: {args.out / 'corruption.md'}, {args.out / 'corruption.json'}, {args.out / 'example.png'}")
+    return 0
+
+
 def cmd_teleop(args) -> int:
     from wsp_data.platforms.maniskill import teleop
 
@@ -310,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser().parse_args(argv)
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
                     "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
-                    "teleop": cmd_teleop}
+                    "teleop": cmd_teleop, "study": cmd_study}
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)
