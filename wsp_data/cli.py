@@ -10,11 +10,14 @@
     wsp calibrate --release DIR --out DIR                            every baseline, scored, in one table
     wsp teleop --task T --seed S --operator NAME                     browser teleoperation → source trajectory
     wsp study corruption --release DIR --out DIR                     RMFA under blur / texture removal (validity)
+    wsp rate SUB [SUB ...] --release DIR --annotator NAME --out DIR  human rating page on 127.0.0.1 (resumable)
+    wsp study agreement --ratings DIR --reports REPORT [REPORT ...]  metrics against the human ratings
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -125,6 +128,21 @@ def parser() -> argparse.ArgumentParser:
     co.add_argument("--count", type=_positive, default=50, help="references (default 50, as the paper)")
     co.add_argument("--seed", type=int, default=0, help="seed of the background regions and the bootstrap")
     co.add_argument("--quiet", action="store_true", help="no progress bar")
+    ag = study.add_parser("agreement", help="Spearman ρ and binary agreement of scores with `wsp rate` ratings")
+    ag.add_argument("--ratings", type=Path, required=True, help="the folder `wsp rate --out` wrote")
+    ag.add_argument("--reports", type=Path, nargs="+", required=True, help="report folders (or report.json) of `wsp score`")
+    ag.add_argument("--threshold", type=float, default=50.0, help="a score at or above it counts as positive (default 50)")
+    ag.add_argument("--out", type=Path, help="also write agreement.json and agreement.md here")
+    r = sub.add_parser("rate", help="serve the human rating page (generated beside reference, model hidden, 1–5)")
+    r.add_argument("submissions", type=Path, nargs="+")
+    r.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    r.add_argument("--annotator", required=True, help="your name: ratings go to OUT/ratings_<name>.jsonl")
+    r.add_argument("--out", type=Path, default=Path("ratings"), help="ratings folder (default ./ratings)")
+    r.add_argument("--suites", nargs="+", default=["t2", "t3"], help="suites to rate (default t2 t3)")
+    r.add_argument("--seeds", type=int, nargs="+", default=[0], help="generation seeds to rate (default 0)")
+    r.add_argument("--per-config", type=_positive, help="rate only the first N instances of each config")
+    r.add_argument("--order-seed", type=int, default=0, help="seed of the presentation order (default 0)")
+    r.add_argument("--port", type=int, default=8766, help="port on 127.0.0.1 (default 8766; 0 = any free port)")
     return p
 
 
@@ -310,7 +328,21 @@ def cmd_calibrate(args) -> int:
 
 
 def cmd_study(args) -> int:
-    from wsp_eval.studies import corruption
+    from wsp_eval.studies import agreement, corruption
+
+    if args.study == "agreement":
+        try:
+            result = agreement.agreement(agreement.load_ratings(args.ratings), agreement.load_scores(args.reports),
+                                         args.threshold)
+        except agreement.AgreementError as e:
+            raise CliError(str(e)) from None
+        text = agreement.markdown(result)
+        print(text)
+        if args.out:
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / "agreement.json").write_text(json.dumps(result, indent=1))
+            (args.out / "agreement.md").write_text(text)
+        return 0
 
     try:
         summary = corruption.run(_release_or_error(args.release), args.out, config=args.config, count=args.count,
@@ -319,6 +351,31 @@ def cmd_study(args) -> int:
         raise CliError(str(e)) from None
     print(corruption.markdown(summary, summary["config"]))
     print(f"written: {args.out / 'corruption.md'}, {args.out / 'corruption.json'}, {args.out / 'example.png'}")
+    return 0
+
+
+def cmd_rate(args) -> int:
+    from wsp_eval.studies.rating import RatingError, RatingServer, RatingSession, collect_items
+
+    try:
+        items, skipped = collect_items(_release_or_error(args.release), args.submissions, tuple(args.suites),
+                                       tuple(args.seeds), args.per_config)
+        session = RatingSession(args.release, items, args.out, args.annotator, args.order_seed)
+        server = RatingServer(session, args.port)
+    except (RatingError, OSError) as e:
+        raise CliError(str(e)) from None
+    for line in skipped[:5]:
+        print(f"not rated: {line}")
+    if len(skipped) > 5:
+        print(f"… and {len(skipped) - 5} more videos missing")
+    st = session.state()
+    print(f"{st['total']} rollouts of {len(args.submissions)} submission(s), {st['rated']} already rated by "
+          f"{args.annotator}; ratings: {session.path}")
+    print(f"open {server.url} in a browser (Ctrl-C stops; re-run to resume)")
+    try:
+        server.serve_forever()
+    finally:
+        server.server_close()
     return 0
 
 
@@ -333,7 +390,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser().parse_args(argv)
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
                     "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
-                    "teleop": cmd_teleop, "study": cmd_study}
+                    "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate}
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)
