@@ -12,6 +12,7 @@
     wsp study corruption --release DIR --out DIR                     RMFA under blur / texture removal (validity)
     wsp rate SUB [SUB ...] --release DIR --annotator NAME --out DIR  human rating page on 127.0.0.1 (resumable)
     wsp study agreement --ratings DIR --reports REPORT [REPORT ...]  metrics against the human ratings
+    wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
 """
 
 from __future__ import annotations
@@ -139,6 +140,9 @@ def parser() -> argparse.ArgumentParser:
     ag.add_argument("--reports", type=Path, nargs="+", required=True, help="report folders (or report.json) of `wsp score`")
     ag.add_argument("--threshold", type=float, default=50.0, help="a score at or above it counts as positive (default 50)")
     ag.add_argument("--out", type=Path, help="also write agreement.json and agreement.md here")
+    lb = sub.add_parser("leaderboard", help="models × (platform, suite, Overall) from score reports, ties marked")
+    lb.add_argument("reports", type=Path, nargs="+", help="report folders (or report.json) of `wsp score`")
+    lb.add_argument("--out", type=Path, required=True, help="folder for leaderboard.{md,html,json}")
     r = sub.add_parser("rate", help="serve the human rating page (generated beside reference, model hidden, 1–5)")
     r.add_argument("submissions", type=Path, nargs="+")
     r.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
@@ -327,11 +331,14 @@ def cmd_calibrate(args) -> int:
         except BaselineError as e:
             raise CliError(str(e)) from None
         reports[name] = _score(sub, release, args.out / "reports" / name, args)
-    table = baseline_table(reports)
-    (args.out / "baselines.md").write_text(table + "\n")
-    print(table)
-    print(f"\nper-baseline reports (HTML with plots): {args.out / 'reports'}/<baseline>/report.html; "
-          f"table: {args.out / 'baselines.md'}")
+    from wsp_eval import leaderboard
+
+    (args.out / "baselines.md").write_text(baseline_table(reports) + "\n")
+    board = leaderboard.build([args.out / "reports" / name for name in names])
+    leaderboard.write(board, args.out / "leaderboard")
+    print(leaderboard.markdown(board))
+    print(f"per-baseline reports (HTML with plots): {args.out / 'reports'}/<baseline>/report.html; table: "
+          f"{args.out / 'baselines.md'}; leaderboard: {args.out / 'leaderboard' / 'leaderboard.html'}")
     return 0
 
 
@@ -359,6 +366,20 @@ def cmd_study(args) -> int:
         raise CliError(str(e)) from None
     print(corruption.markdown(summary, summary["config"]))
     print(f"written: {args.out / 'corruption.md'}, {args.out / 'corruption.json'}, {args.out / 'example.png'}")
+    return 0
+
+
+def cmd_leaderboard(args) -> int:
+    from wsp_eval import leaderboard
+
+    try:
+        board = leaderboard.build(args.reports)
+    except leaderboard.LeaderboardError as e:
+        raise CliError(str(e)) from None
+    leaderboard.write(board, args.out)
+    print(leaderboard.markdown(board))
+    print(f"leaderboard: {args.out / 'leaderboard.html'} (sortable), {args.out / 'leaderboard.md'}, "
+          f"{args.out / 'leaderboard.json'}")
     return 0
 
 
@@ -398,7 +419,8 @@ def main(argv: list[str] | None = None) -> int:
         args = parser().parse_args(argv)
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
                     "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
-                    "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate}
+                    "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate,
+                    "leaderboard": cmd_leaderboard}
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)

@@ -34,7 +34,7 @@ import pyarrow.parquet as pq
 
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
-from wsp_eval.release_format import INSTANCES, load_release
+from wsp_eval.release_format import INSTANCES, RELEASE_JSON, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
@@ -228,7 +228,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
         submission={"path": str(submission), "model": meta["model"], "seeds": meta["seeds"],
                     "hardware": meta.get("hardware"), "generation_seconds": meta.get("generation_seconds")},
         release={"path": str(release), "version": rel_meta["version"],
-                 "code_version": str(rel_meta.get("code_version", ""))},
+                 "code_version": str(rel_meta.get("code_version", "")),
+                 "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
         backends=backends.describe(),
         allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
         problems=problems,

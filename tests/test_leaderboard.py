@@ -1,0 +1,88 @@
+"""`wsp leaderboard` over real score reports of calibration baselines on the shared tiny ManiSkill release.
+
+The oracle (the references themselves) must rank first on T2–T4, where it scores 100, and the static baseline
+below it; an identical copy of a report under another model name differs by exactly 0 on every instance, so it
+must be marked tied in every column (a paired bootstrap interval of [0, 0] contains 0); a report made against
+another release goes to its own table. The HTML is sorted by clicking in real headless Chromium.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wsp_data.cli import main
+from wsp_eval.baselines import write_baseline
+
+
+@pytest.fixture(scope="module")
+def reports(suites_release, tmp_path_factory):
+    root = tmp_path_factory.mktemp("leaderboard")
+    out = {}
+    for name in ("oracle", "static"):
+        write_baseline(name, suites_release, root / "subs" / name, seeds=(0,))
+        assert main(["score", str(root / "subs" / name), "--release", str(suites_release), "--out",
+                     str(root / name), "--quiet"]) == 0
+        out[name] = root / name
+    twin = json.loads((out["oracle"] / "report.json").read_text())
+    twin["submission"]["model"] = "oracle-twin"
+    (root / "twin").mkdir()
+    (root / "twin" / "report.json").write_text(json.dumps(twin))
+    out["twin"] = root / "twin"
+    other = json.loads((out["static"] / "report.json").read_text())
+    other["submission"]["model"] = "static-elsewhere"
+    other["release"]["release_json_sha256"] = "0" * 64
+    (root / "other").mkdir()
+    (root / "other" / "report.json").write_text(json.dumps(other))
+    out["other"] = root / "other"
+    return out
+
+
+def test_ranks_ties_and_separate_tables(reports, tmp_path, capsys):
+    out = tmp_path / "lb"
+    assert main(["leaderboard", str(reports["oracle"]), str(reports["static"]), str(reports["twin"]),
+                 str(reports["other"]), "--out", str(out)]) == 0
+    assert "not comparable" in capsys.readouterr().out.lower()
+    board = json.loads((out / "leaderboard.json").read_text())
+    main_rows = board["main"]["rows"]
+    assert set(main_rows) == {"baseline:oracle", "baseline:static", "oracle-twin"}
+    for col in ("maniskill t2", "maniskill t3", "maniskill t4"):
+        oracle, static, twin = (main_rows[m]["cells"][col] for m in ("baseline:oracle", "baseline:static", "oracle-twin"))
+        assert oracle["score"] > static["score"] and static["rank"] == 3
+        assert {oracle["rank"], twin["rank"]} == {1} and (oracle["tied_with_above"] or twin["tied_with_above"])
+    twin_cells = main_rows["oracle-twin"]["cells"]
+    assert all(c["rank"] == main_rows["baseline:oracle"]["cells"][k]["rank"] for k, c in twin_cells.items())
+    [apart] = board["not_comparable"]
+    assert apart["differs_in"] == ["release"] and list(apart["rows"]) == ["static-elsewhere"]
+    md = (out / "leaderboard.md").read_text()
+    assert "1=." in md and "release.json sha256" in md
+
+
+def test_refuses_bad_input(reports, tmp_path, capsys):
+    assert main(["leaderboard", str(tmp_path / "nope"), "--out", str(tmp_path / "x")]) == 2
+    assert "not a `wsp score` report" in capsys.readouterr().err
+    assert main(["leaderboard", str(reports["oracle"]), str(reports["oracle"]), "--out", str(tmp_path / "y")]) == 2
+    assert "one report per model" in capsys.readouterr().err
+
+
+def test_html_sorts_in_a_browser(reports, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    from test_teleop import _browser
+
+    out = tmp_path / "lb"
+    assert main(["leaderboard", str(reports["static"]), str(reports["oracle"]), "--out", str(out)]) == 0
+    driver = _browser()
+    try:
+        driver.get((out / "leaderboard.html").as_uri())
+        first = lambda: driver.find_elements(By.CSS_SELECTOR, "tbody tr")[0].find_elements(By.TAG_NAME, "td")[0].text  # noqa: E731
+        headers = driver.find_elements(By.CSS_SELECTOR, "thead th")
+        t2 = next(h for h in headers if h.text == "maniskill t2")
+        t2.click()
+        assert first() == "baseline:oracle"  # sorted by T2, best first
+        headers[0].click()
+        assert first() == "baseline:oracle"  # by name: "baseline:oracle" < "baseline:static"
+        driver.save_screenshot(str(tmp_path / "leaderboard.png"))
+    finally:
+        driver.quit()
