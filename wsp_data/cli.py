@@ -13,6 +13,7 @@
     wsp rate SUB [SUB ...] --release DIR --annotator NAME --out DIR  human rating page on 127.0.0.1 (resumable)
     wsp study agreement --ratings DIR --reports REPORT [REPORT ...]  metrics against the human ratings
     wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
+    wsp export-inputs --release DIR --out DIR                        inputs-only release (private test sets)
 """
 
 from __future__ import annotations
@@ -140,6 +141,10 @@ def parser() -> argparse.ArgumentParser:
     ag.add_argument("--reports", type=Path, nargs="+", required=True, help="report folders (or report.json) of `wsp score`")
     ag.add_argument("--threshold", type=float, default=50.0, help="a score at or above it counts as positive (default 50)")
     ag.add_argument("--out", type=Path, help="also write agreement.json and agreement.md here")
+    ex = sub.add_parser("export-inputs", help="write an inputs-only release: first frames and actions, no reference")
+    ex.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    ex.add_argument("--out", type=Path, required=True, help="folder of the inputs-only release")
+    ex.add_argument("--quiet", action="store_true", help="no progress bar")
     lb = sub.add_parser("leaderboard", help="models × (platform, suite, Overall) from score reports, ties marked")
     lb.add_argument("reports", type=Path, nargs="+", help="report folders (or report.json) of `wsp score`")
     lb.add_argument("--out", type=Path, required=True, help="folder for leaderboard.{md,html,json}")
@@ -369,6 +374,20 @@ def cmd_study(args) -> int:
     return 0
 
 
+def cmd_export_inputs(args) -> int:
+    from wsp_eval.inputs import ExportError, export_inputs
+
+    try:
+        manifest = export_inputs(_release_or_error(args.release), args.out, progress=not args.quiet)
+    except ExportError as e:
+        raise CliError(str(e)) from None
+    n = sum(c["episodes"] for c in manifest["configs"].values())
+    print(f"wrote the inputs of {n} episodes ({', '.join(manifest['configs'])}) to {args.out}: first frames and "
+          f"actions only; scored against the release with release.json sha256 "
+          f"{manifest['source_release_json_sha256'][:12]}")
+    return 0
+
+
 def cmd_leaderboard(args) -> int:
     from wsp_eval import leaderboard
 
@@ -420,7 +439,7 @@ def main(argv: list[str] | None = None) -> int:
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
                     "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
                     "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate,
-                    "leaderboard": cmd_leaderboard}
+                    "leaderboard": cmd_leaderboard, "export-inputs": cmd_export_inputs}
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)

@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.reference import episodes, reference_frames, reference_masks
-from wsp_eval.release_format import INSTANCES
+from wsp_eval.release_format import FIRST_FRAME, INPUT_ACTIONS, INSTANCES
 
 T1_PREFIX = "t1_"  # T1 configs: the unperturbed source rollout is the scored `original` role
 T1_SOURCE_ROLE = "original"  # role of the unperturbed rollout in a T1 instance
@@ -58,22 +58,43 @@ class EpisodeContext:
     def _position(self) -> int:
         return list(self.row["episode_indices"]).index(self.episode_index)
 
+    @property
+    def inputs_only(self) -> bool:
+        """Whether the release is an inputs-only export (`wsp_eval.inputs`): first frames and actions, no video."""
+        return (self.config_dir / INPUT_ACTIONS).is_file()
+
+    def first_frame(self) -> np.ndarray:
+        """Frame 0 (H, W, 3) uint8: what a model conditions on (from either kind of release)."""
+        if self.inputs_only:
+            return self._cached("first", lambda: _first_frame(self.config_dir, self.episode_id))
+        return self.frames()[0]
+
     def frames(self) -> np.ndarray:
         """Reference RGB frames (N, H, W, 3) uint8."""
+        self._full_release("reference frames")
         return self._cached("frames", lambda: reference_frames(self.config_dir, self.episode_index))
 
     def masks(self) -> np.ndarray:
         """Robot label masks (N, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers."""
+        self._full_release("robot masks")
         return self._cached("masks", lambda: reference_masks(self.config_dir, self.episode_index))
 
     def source_frames(self) -> np.ndarray:
         """RGB frames of the instance's unperturbed source rollout (its own length)."""
+        self._full_release("source rollouts")
         index = source_episode_index(self.config, self.row, self.config_dir)
         return self._cached("source", lambda: reference_frames(self.config_dir, index))
 
     def actions(self, key: str = "action") -> np.ndarray:
         """The episode's action stream `key` (`action`, or `action.ee` / `action.joint`), float32 (T, D)."""
+        if self.inputs_only:
+            return self._cached(f"actions/{key}", lambda: _input_actions(self.config_dir, self.episode_index, key))
         return self._cached(f"actions/{key}", lambda: episode_actions(self.config_dir, self.episode_index, key))
+
+    def _full_release(self, what: str) -> None:
+        if self.inputs_only:
+            raise BaselineError(f"{self.release}: an inputs-only release holds no {what} (only first frames and "
+                                "actions: that is what keeps its references private); use the full release")
 
     def rng(self) -> np.random.Generator:
         """A fresh generator seeded from (generation seed, episode index)."""
@@ -102,6 +123,29 @@ def episode_actions(config_dir: Path, episode_index: int, key: str = "action") -
     if t.num_rows != hi - lo:
         raise ValueError(f"{path}: episode {episode_index} has {t.num_rows} rows, expected {hi - lo}")
     return np.asarray(t.column(key).to_pylist(), dtype=np.float32).reshape(t.num_rows, -1)
+
+
+def _first_frame(config_dir: Path, episode_id: str) -> np.ndarray:
+    import cv2
+
+    path = config_dir / FIRST_FRAME.format(episode_id=episode_id)
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise ValueError(f"{path}: missing or unreadable first frame")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def _input_actions(config_dir: Path, episode_index: int, key: str) -> np.ndarray:
+    path = config_dir / INPUT_ACTIONS
+    names = pq.read_schema(path).names
+    if key not in names:
+        raise ValueError(f"{path}: no column {key!r}; action columns: "
+                         + ", ".join(n for n in names if n.startswith("action")))
+    t = pq.read_table(path, columns=[key], filters=[("episode_index", "=", episode_index)])
+    if t.num_rows != 1:
+        raise ValueError(f"{path}: episode {episode_index} found {t.num_rows} times")
+    rows = t.column(key)[0].as_py()
+    return np.asarray(rows, dtype=np.float32).reshape(len(rows), -1)
 
 
 @functools.lru_cache(maxsize=8)

@@ -80,7 +80,7 @@ def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (
             actions = ctx.actions(action_key)
         except ValueError as e:
             raise GenerateError(str(e)) from None
-        return model(ctx.frames()[0].copy(), actions.copy(), ctx.fps, ctx.seed)
+        return model(ctx.first_frame().copy(), actions.copy(), ctx.fps, ctx.seed)
 
     return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress)
 

@@ -95,6 +95,14 @@ def _header(report: dict) -> list[tuple[str, str]]:
     items.append(("Missing rollouts", _missing(report)))
     if report.get("encoding_check", "lossless only") != "lossless only":
         items.append(("Encoding check", f"{report['encoding_check']}: not comparable with lossless submissions"))
+    copies = report.get("copy_check") or {}
+    if copies.get("probable_copy"):
+        items.append(("Copy check", f"PROBABLE COPY OF THE REFERENCES: {copies['equal_to_reference']} of "
+                                    f"{copies['videos']} videos equal their reference frame for frame (a model's "
+                                    "output never does; the oracle baseline is such a copy by design)"))
+    elif copies:
+        items.append(("Copy check", f"{copies['equal_to_reference']} of {copies['videos']} videos equal their "
+                                    "reference"))
     timing = report.get("timing") or {}
     n = len(report.get("instances") or []) or timing.get("instances")
     if n is not None or timing:

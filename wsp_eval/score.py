@@ -41,6 +41,8 @@ from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
 BOOTSTRAP = 1000  # resamples for the 95% CIs
+COPY_MAD = 0.5  # grey levels: a video closer than this to its reference (mean absolute difference) equals it
+COPY_SHARE = 0.9  # a submission whose videos equal their references this often is flagged as a probable copy
 BOOTSTRAP_SEED = 0
 CACHE = "cache/instances.jsonl"
 CACHE_KEY = "cache/key.json"
@@ -115,13 +117,30 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
             seeds.append({"seed": seed, "score": 0.0, "missing": True})
             continue
         score, detail = module.score_seed(prepared, videos, backends)
-        seeds.append({"seed": seed, "score": float(score), **detail})
+        seeds.append({"seed": seed, "score": float(score), **detail, "copy": _is_copy(ref, videos)})
     record = {"config": job.config, "suite": suite, "platform": platform, "instance_id": job.row["instance_id"],
               "task": job.row["task"], "score": float(np.mean([s["score"] for s in seeds])), "seeds": seeds,
               "problems": problems}
     if hasattr(module, "reference_check"):
         record["reference"] = module.reference_check(prepared)
     return record
+
+
+def _is_copy(ref: InstanceReference, videos: dict[str, tuple[np.ndarray, float]]) -> bool:
+    """Whether every video of a seed is its reference, frame for frame (mean absolute difference < COPY_MAD)."""
+    for role, (frames, _) in videos.items():
+        reference = ref.frames(role)
+        if frames.shape != reference.shape or np.abs(frames.astype(np.int16) - reference).mean() >= COPY_MAD:
+            return False
+    return True
+
+
+def copy_check(records: list[dict]) -> dict:
+    """How many scored videos equal their references; `probable_copy` when at least COPY_SHARE of them do."""
+    seeds = [s for r in records for s in r["seeds"] if not s.get("missing")]
+    copies = sum(bool(s.get("copy")) for s in seeds)
+    return {"videos": len(seeds), "equal_to_reference": copies,
+            "probable_copy": bool(seeds) and copies >= COPY_SHARE * len(seeds)}
 
 
 def _worker(args: tuple[Job, BackendSpec]) -> dict:
@@ -232,7 +251,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
                  "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
         backends=backends.describe(),
         allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
-        problems=problems,
+        problems=problems, copy_check=copy_check(records),
         timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
         instances=records,
     )
