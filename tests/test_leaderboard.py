@@ -86,3 +86,27 @@ def test_html_sorts_in_a_browser(reports, tmp_path):
         driver.save_screenshot(str(tmp_path / "leaderboard.png"))
     finally:
         driver.quit()
+
+
+def test_report_shows_the_worst_instances(reports):
+    """The static baseline's report (scored in the fixture) holds frame strips of its worst instances per config,
+    generated above reference, with the evidence that decided each (T4: d and the gate; T5: the judge's verdict)."""
+    import cv2
+
+    folder = reports["static"]
+    report = json.loads((folder / "report.json").read_text())
+    strips = report["strips"]
+    assert {s["config"] for s in strips} == {"t2_maniskill", "t3_maniskill", "t4_maniskill", "t5_maniskill"}
+    by_config = {}
+    for s in strips:
+        by_config.setdefault(s["config"], []).append(s)
+        image = cv2.imread(str(folder / s["image"]))
+        assert image is not None and image.shape[0] > image.shape[1] / 6 * 2 - 1  # two rows of six tiles
+    scores = {(r["config"], r["instance_id"]): r["score"] for r in report["instances"]}
+    for config, items in by_config.items():
+        worst = sorted(v for (c, _), v in scores.items() if c == config)[:len(items)]
+        assert [scores[(config, s["instance_id"])] for s in items] == worst  # the lowest-scoring, in order
+    assert any("arm gate failed" in s["evidence"] for s in by_config["t4_maniskill"])  # static: the arm never moves
+    assert all("judged" in s["evidence"] for s in by_config["t5_maniskill"])
+    page = (folder / "report.html").read_text()
+    assert all(f'src="{s["image"]}"' in page for s in strips) and "Worst-scoring instances" in page

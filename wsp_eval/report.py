@@ -246,7 +246,19 @@ def _blocks(report: dict) -> list[Block]:
     blocks += [("h", 2, "Cross-platform macro average"), ("p", _macro(report))]
     breakdowns = [b for p, plat in _platforms(report).items() for k, s in sorted(_suites(plat).items())
                   for b in _breakdown(p, k, s)]
-    return blocks + ([("h", 2, "Breakdowns"), *breakdowns] if breakdowns else [])
+    blocks += [("h", 2, "Breakdowns"), *breakdowns] if breakdowns else []
+    strips = report.get("strips") or []
+    if strips:
+        blocks += [("h", 2, "Worst-scoring instances"),
+                   ("p", "Per config, the lowest-scoring instances (their lowest-scoring seed): six frames spread over "
+                         "the clip, generated above the reference; for T4 and T5 the evaluated object's frame-0 "
+                         "position is ringed.")]
+        for config in dict.fromkeys(e["config"] for e in strips):
+            blocks.append(("h", 3, config))
+            for e in (x for x in strips if x["config"] == config):
+                blocks.append(("image", e["image"], f"{e['instance_id']} ({e['task']}, seed {e['seed']}, "
+                                                    f"{e['role']}): {e['evidence']}"))
+    return blocks
 
 
 def _breakdown(platform: str, key: str, suite: dict) -> list[Block]:
@@ -291,6 +303,8 @@ def markdown(report: dict) -> str:
                 out.append(text)
             case ("table", table):
                 out.append(_md_table(table))
+            case ("image", src, caption):
+                out.append(f"![{caption}]({src})\n\n{caption}")
     return "\n\n".join(out) + "\n"
 
 
@@ -329,6 +343,9 @@ def _html_block(block: Block) -> str:
             return _html_table(table)
         case ("plot", caption, make_svg):
             return f"<figure>{make_svg()}<figcaption>{escape(caption)}</figcaption></figure>"
+        case ("image", src, caption):
+            return (f'<figure><img src="{escape(src)}" alt="{escape(caption)}" style="max-width:100%">'
+                    f"<figcaption>{escape(caption)}</figcaption></figure>")
     raise ValueError(f"unknown block {block[0]!r}")
 
 

@@ -207,6 +207,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     from tqdm import tqdm
 
     from wsp_eval.report import write_reports
+    from wsp_eval.strips import write_strips
 
     submission, release, out = Path(submission), Path(release), Path(out)
     rel_meta = load_release(release)
@@ -255,6 +256,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
         timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
         instances=records,
     )
+    report["strips"] = write_strips(records, rows, release, submission, out)
     write_reports(report, out)
     return report
 
