@@ -146,6 +146,8 @@ def test_release_files(t1_release):
     assert croissant["rai:dataCollectionType"] == "Simulation"
     assert pq.read_table(t1_release / "t1_maniskill" / INSTANCES).num_rows == rel["configs"]["t1_maniskill"]["counts"]["instances"]
     assert not (t1_release / ".wsp-staging").exists()
+    info = json.loads((t1_release / "t1_maniskill" / "meta" / "info.json").read_text())
+    assert info["splits"] == {"test": f"0:{info['total_episodes']}"}  # a scored config is the test split
 
 
 def test_info_describes_release(t1_release):

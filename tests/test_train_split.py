@@ -34,6 +34,9 @@ def test_release_holds_both_configs(release):
     assert "config_name: t1_maniskill" in card and "config_name: train_maniskill" in card
     rel = json.loads((release / RELEASE_JSON).read_text())
     assert set(rel["configs"]) == {"t1_maniskill", "train_maniskill"}
+    for config, split in (("train_maniskill", "train"), ("t1_maniskill", "test")):  # LeRobot's info.json splits
+        info = json.loads((release / config / "meta" / "info.json").read_text())
+        assert list(info["splits"]) == [split], (config, info["splits"])
 
 
 def test_no_test_seed_leaks_into_train(release):

@@ -25,6 +25,7 @@ from wsp_data.schema import EPISODE_ID, INSTANCES, MASK_KEY, SOURCE_ROLE, Platfo
 from wsp_data.staging import RolloutArrays, SlotRecord
 
 REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
+TRAIN_SPLIT, TEST_SPLIT = "train", "test"  # LeRobot info.json `splits`: training configs, scored configs
 
 
 def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
@@ -94,6 +95,7 @@ def write_config(config_dir: Path, config: str, platform: str,
             row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
         instance_rows.append(row)
     ds.finalize()
+    _set_split(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
     _drop_fingerprints(tmp)
     _append_episode_columns(tmp, episode_rows)
     _canonicalize_json(tmp / "meta" / "stats.json")
@@ -124,6 +126,13 @@ def _drop_fingerprints(root: Path) -> None:
             hf.pop("fingerprint", None)
             meta[b"huggingface"] = json.dumps(hf).encode()
             pq.write_table(table.replace_schema_metadata(meta), path)
+
+
+def _set_split(info_path: Path, split: str) -> None:
+    """LeRobot names every episode `train`; a test config's episodes are the `test` split (the card says so too)."""
+    info = json.loads(info_path.read_text())
+    info["splits"] = {split: f"0:{info['total_episodes']}"}
+    info_path.write_text(json.dumps(info, indent=4))
 
 
 def _canonicalize_json(path: Path) -> None:
