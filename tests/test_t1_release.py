@@ -153,3 +153,6 @@ def test_release_files(t1_release):
 def test_info_describes_release(t1_release):
     text = describe(t1_release)
     assert "t1_maniskill" in text and "PickCube,PushCube" in text
+    assert "licence apache-2.0" in text and " test " in next(line for line in text.splitlines()
+                                                              if line.startswith("t1_maniskill"))
+    assert "dataset card lists" not in text  # card and release agree
