@@ -108,5 +108,6 @@ def test_report_shows_the_worst_instances(reports):
         assert [scores[(config, s["instance_id"])] for s in items] == worst  # the lowest-scoring, in order
     assert any("arm gate failed" in s["evidence"] for s in by_config["t4_maniskill"])  # static: the arm never moves
     assert all("judged" in s["evidence"] for s in by_config["t5_maniskill"])
+    assert all("per 2 s window" in s["evidence"] for s in by_config["t2_maniskill"])
     page = (folder / "report.html").read_text()
     assert all(f'src="{s["image"]}"' in page for s in strips) and "Worst-scoring instances" in page

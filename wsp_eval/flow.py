@@ -142,13 +142,18 @@ def rmfa_window_score(f_hat: np.ndarray, f_star: np.ndarray, mask: np.ndarray, t
     return 100.0 * max(0.0, 1.0 - e / max(r, c))
 
 
-def rmfa_score(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
-               ) -> float | None:
-    """Instance RMFA: mean S_w over the windows with non-empty M; None when no window is scorable.
-    Both flow sequences must cover the same common duration (same K)."""
+def rmfa_windows(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
+                 ) -> list[float | None]:
+    """S_w of every window (`windows`), None where M is empty. Both flow sequences must cover the same common
+    duration (same K)."""
     if f_hat.shape != f_star.shape:
         raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ: sample both "
                          "over their common duration")
-    scores = [s for a, b in windows(len(f_star))
-              if (s := rmfa_window_score(f_hat[a:b], f_star[a:b], masks[a:b], tau, c)) is not None]
+    return [rmfa_window_score(f_hat[a:b], f_star[a:b], masks[a:b], tau, c) for a, b in windows(len(f_star))]
+
+
+def rmfa_score(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
+               ) -> float | None:
+    """Instance RMFA: mean S_w over the windows with non-empty M; None when no window is scorable."""
+    scores = [s for s in rmfa_windows(f_hat, f_star, masks, tau, c) if s is not None]
     return float(np.mean(scores)) if scores else None

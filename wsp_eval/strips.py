@@ -2,7 +2,9 @@
 
 Per scored config, the `WORST` lowest-scoring instances (their lowest-scoring seed): `COLUMNS` frames spread over
 the clip, the generated video above its reference, the evaluated object's frame-0 position ringed on both for
-T4 and T5, written as `strips/<config>/<n>.png` beside the report, with the evidence that decided the score.
+T4 and T5 and, on T4's generated row, the tracked object centroid's path so far; written as
+`strips/<config>/<n>.png` beside the report, with the evidence that decided the score (T1 r against r*, T2/T3
+RMFA per 2 s window, T4 displacement, gate and tracking, T5 the judge's verdict).
 """
 
 from __future__ import annotations
@@ -34,20 +36,40 @@ def evidence(suite: str, seed: dict, row: dict) -> str:
         return (f"S {s:.0f}: judged {seed.get('label') or 'unreadable'} (intended {row.get('primitive')}); robot acts: "
                 f"{ok(seed.get('agent_ok'))}; object responds: {ok(seed.get('object_ok'))}")
     if suite in ("t2", "t3"):
-        return f"RMFA {s:.1f} over the first {seed.get('common_seconds', 0):.1f} s"
+        windows = ", ".join("–" if w is None else f"{w:.0f}" for w in seed.get("windows") or [])
+        return f"RMFA {s:.1f} over the first {seed.get('common_seconds', 0):.1f} s; per 2 s window: {windows or '–'}"
+    if suite == "t1" and "r_star" in seed:
+        if seed.get("r") is None:
+            return f"S {s:.1f}: the large perturbation left no trace in the generated videos (r undefined)"
+        return f"S {s:.1f}: r = {seed['r']:.3f} against the simulator's r* = {seed['r_star']:.3f}"
     return f"S {s:.1f}"
 
 
-def _tiles(frames: np.ndarray, mark: tuple[float, float] | None) -> np.ndarray:
+def _tiles(frames: np.ndarray, mark: tuple[float, float] | None, path: np.ndarray | None = None) -> np.ndarray:
+    """COLUMNS frames side by side; `mark` (256² scoring frame) ringed; `path` (T, 2), the tracked centroid in
+    the scoring frame, drawn up to each tile's frame."""
     picks = np.linspace(0, len(frames) - 1, COLUMNS).round().astype(int)
+    scale = TILE / 256
     tiles = []
     for i in picks:
-        tile = cv2.resize(frames[i], (TILE, TILE), interpolation=cv2.INTER_AREA)
+        tile = np.ascontiguousarray(cv2.resize(frames[i], (TILE, TILE), interpolation=cv2.INTER_AREA))
         if mark is not None:
-            center = (int(round(mark[0] * TILE / 256)), int(round(mark[1] * TILE / 256)))
+            center = (int(round(mark[0] * scale)), int(round(mark[1] * scale)))
             cv2.circle(tile, center, 7, (255, 40, 40), 1, cv2.LINE_AA)
+        if path is not None:
+            pts = np.round(path[: min(i, len(path) - 1) + 1] * scale).astype(np.int32)
+            cv2.polylines(tile, [pts.reshape(-1, 1, 2)], False, (40, 220, 255), 1, cv2.LINE_AA)
+            cv2.circle(tile, tuple(int(v) for v in pts[-1]), 2, (40, 220, 255), -1)
         tiles.append(tile)
     return np.hstack(tiles)
+
+
+def tracked_path(frames: np.ndarray, object_px) -> np.ndarray:
+    """T4's object centroid through a video (`wsp_eval.tracking`, default tracker), scoring-frame pixels."""
+    from wsp_eval.tracking import centroid_path, query_grid, scoring_frames, track
+
+    tracks = track(scoring_frames(frames), query_grid(np.asarray(object_px, float)), anchored=True)
+    return centroid_path(tracks, anchored=True)
 
 
 def write_strips(records: list[dict], rows: dict[str, list[dict]], release: Path, submission: Path,
@@ -68,12 +90,13 @@ def write_strips(records: list[dict], rows: dict[str, list[dict]], release: Path
                 continue
             reference = reference_frames(release / config, row["episode_indices"][k])
             mark = row.get("object_pixel_256") if rec["suite"] in ("t4", "t5") else None
-            image = np.vstack([_tiles(generated, mark), np.full((4, COLUMNS * TILE, 3), 255, np.uint8),
+            path = tracked_path(generated, mark) if rec["suite"] == "t4" else None
+            image = np.vstack([_tiles(generated, mark, path), np.full((4, COLUMNS * TILE, 3), 255, np.uint8),
                                _tiles(reference, mark)])
-            path = Path(STRIPS_DIR) / config / f"{n + 1}.png"
-            (out / path).parent.mkdir(parents=True, exist_ok=True)
-            cv2.imwrite(str(out / path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+            file = Path(STRIPS_DIR) / config / f"{n + 1}.png"
+            (out / file).parent.mkdir(parents=True, exist_ok=True)
+            cv2.imwrite(str(out / file), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
             entries.append({"config": config, "instance_id": rec["instance_id"], "task": rec["task"],
                             "seed": seed["seed"], "score": seed["score"], "role": row["roles"][k],
-                            "evidence": evidence(rec["suite"], seed, row), "image": path.as_posix()})
+                            "evidence": evidence(rec["suite"], seed, row), "image": file.as_posix()})
     return entries

@@ -23,13 +23,17 @@ def calibration(r: float, r_star: float) -> float:
     return float(np.clip(s, 0.0, 1.0))
 
 
-def seed_score(videos: dict[str, tuple[np.ndarray, float]], r_star: float) -> float:
-    """S for one seed; `videos` maps role → (frames, fps) of the generated rollouts."""
+def ratio(videos: dict[str, tuple[np.ndarray, float]]) -> float | None:
+    """r = D(ĝ⁰, ĝˢ) / D(ĝ⁰, ĝˡ) for one seed; None when D(ĝ⁰, ĝˡ) = 0 (the large perturbation left no trace)."""
     (g0, f0), (gs, fs), (gl, fl) = (videos[r] for r in ROLES)
     d_ol = aligned_mse(g0, gl, f0, fl)
-    if d_ol == 0:
-        return 0.0
-    return calibration(aligned_mse(g0, gs, f0, fs) / d_ol, r_star)
+    return None if d_ol == 0 else aligned_mse(g0, gs, f0, fs) / d_ol
+
+
+def seed_score(videos: dict[str, tuple[np.ndarray, float]], r_star: float) -> float:
+    """S for one seed; `videos` maps role → (frames, fps) of the generated rollouts."""
+    r = ratio(videos)
+    return 0.0 if r is None else calibration(r, r_star)
 
 
 def instance_score(per_seed: list[dict[str, tuple[np.ndarray, float]]], r_star: float) -> float:
@@ -42,8 +46,9 @@ def prepare(ref, backends) -> float:
 
 
 def score_seed(r_star: float, videos, backends) -> tuple[float, dict]:
-    """The engine's interface: S on the 0–100 scale of the suite score."""
-    return 100.0 * seed_score(videos, r_star), {}
+    """The engine's interface: S on the 0–100 scale of the suite score, with r and r* (the report's evidence)."""
+    r = ratio(videos)
+    return (0.0 if r is None else 100.0 * calibration(r, r_star)), {"r": r, "r_star": r_star}
 
 
 def groups(rows: list[dict]) -> list[str]:

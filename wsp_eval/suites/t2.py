@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.flow import clip_duration, reference_flows, rmfa_score, video_flows
+from wsp_eval.flow import clip_duration, reference_flows, rmfa_windows, video_flows
 
 SUITE, TITLE = "t2", "Global trajectory coverage"
 ROLES = ("reference",)
@@ -39,8 +39,11 @@ def rmfa(prepared: _Reference, frames: np.ndarray, fps: float, backend) -> tuple
     """RMFA of one generated video; a video too short for one flow (or with no scorable window) scores 0."""
     duration = min(prepared.duration, clip_duration(len(frames), fps))
     ref = prepared.flows(duration)
-    score = rmfa_score(video_flows(frames, fps, duration, backend), ref.flows, ref.masks)
-    return (0.0 if score is None else score), {"common_seconds": duration, "flows": len(ref.flows)}
+    per_window = rmfa_windows(video_flows(frames, fps, duration, backend), ref.flows, ref.masks)
+    scored = [s for s in per_window if s is not None]
+    return (float(np.mean(scored)) if scored else 0.0), {
+        "common_seconds": duration, "flows": len(ref.flows),
+        "windows": [None if s is None else round(s, 2) for s in per_window]}
 
 
 def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
