@@ -57,6 +57,8 @@ def test_ranks_ties_and_separate_tables(reports, tmp_path, capsys):
     assert apart["differs_in"] == ["release"] and list(apart["rows"]) == ["static-elsewhere"]
     md = (out / "leaderboard.md").read_text()
     assert "1=." in md and "release.json sha256" in md
+    assert main_rows["baseline:oracle"]["cells"]["maniskill overall"]["partial"]  # no T1 in this release: marked *
+    assert "100.0* [" in md
 
 
 def test_refuses_bad_input(reports, tmp_path, capsys):

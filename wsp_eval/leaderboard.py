@@ -136,7 +136,8 @@ def table(entries: list[Entry]) -> dict:
             tie = k > 0 and tied(have[k - 1][0], e, platform, suite)
             rank = rank if tie else k + 1
             rows[e.model]["cells"][f"{platform} {suite}"] = {"score": c["score"], "ci": c.get("ci"), "rank": rank,
-                                                             "tied_with_above": tie}
+                                                             "tied_with_above": tie,
+                                                             "partial": c.get("complete") is False}
     first = entries[0].report
     return {"columns": [f"{p} {s}" for p, s in cols], "rows": rows,
             "release": first.get("release", {}), "backends": first.get("backends", {}),
@@ -168,7 +169,8 @@ def _fmt(cell: dict | None) -> str:
     if not cell:
         return "—"
     ci = f" [{cell['ci'][0]:.1f}, {cell['ci'][1]:.1f}]" if cell.get("ci") else ""
-    return f"{cell['rank']}{'=' if cell['tied_with_above'] else ''}. {cell['score']:.1f}{ci}"
+    partial = "*" if cell.get("partial") else ""
+    return f"{cell['rank']}{'=' if cell['tied_with_above'] else ''}. {cell['score']:.1f}{partial}{ci}"
 
 
 def _header(t: dict) -> list[str]:
@@ -188,7 +190,7 @@ def markdown(board: dict) -> str:
         return lines
 
     out = ["Cells: rank (\"=\": not significantly different from the model ranked just above, paired bootstrap), "
-           "score [95 % CI].", ""] + one(board["main"])
+           "score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored).", ""] + one(board["main"])
     for t in board["not_comparable"]:
         out += ["", f"Not comparable with the table above (different {', '.join(t['differs_in'])}):", ""] + one(t)
     return "\n".join(out) + "\n"
@@ -212,7 +214,8 @@ def html(board: dict) -> str:
             "th,td{border:1px solid #ccc;padding:.3em .6em;text-align:right;white-space:nowrap}th{cursor:pointer;background:#f3f3f3}"
             "td:first-child{text-align:left}</style></head><body><h1>WorldSimProbe leaderboard</h1>"
             "<p>Click a column to sort. Cells: rank (\"=\": not significantly different from the model ranked just "
-            "above, paired bootstrap), score [95 % CI].</p>" + "".join(parts) +
+            "above, paired bootstrap), score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored).</p>"
+            + "".join(parts) +
             "<script>function sortBy(th){const t=th.closest('table'),i=[...th.parentNode.children].indexOf(th),"
             "b=t.tBodies[0],r=[...b.rows],num=i>0;r.sort((x,y)=>{const a=x.cells[i].dataset.v,c=y.cells[i].dataset.v;"
             "return num?(+c)-(+a):a.localeCompare(c)});r.forEach(x=>b.appendChild(x));}</script></body></html>\n")
