@@ -22,13 +22,14 @@ import re
 import threading
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import ThreadingHTTPServer
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pyarrow.parquet as pq
 
+from wsp_eval.local_http import JsonRequestHandler
 from wsp_eval.reference import reference_frames
 from wsp_eval.release_format import INSTANCES, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected
@@ -198,23 +199,8 @@ class RatingServer(ThreadingHTTPServer):
         return f"http://127.0.0.1:{self.server_address[1]}/"
 
 
-class _Handler(BaseHTTPRequestHandler):
+class _Handler(JsonRequestHandler):
     server: RatingServer
-    protocol_version = "HTTP/1.1"
-
-    def log_message(self, format, *args) -> None:  # noqa: A002 - quiet terminal
-        pass
-
-    def _send(self, status: int, body: bytes, ctype: str) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", ctype)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.end_headers()
-        self.wfile.write(body)
-
-    def _json(self, obj, status: int = 200) -> None:
-        self._send(status, json.dumps(obj).encode(), "application/json")
 
     def do_GET(self) -> None:  # noqa: N802
         path = self.path.split("?", 1)[0]
@@ -233,15 +219,9 @@ class _Handler(BaseHTTPRequestHandler):
     def do_POST(self) -> None:  # noqa: N802
         path = self.path.split("?", 1)[0]
         try:
-            n = int(self.headers.get("Content-Length") or 0)
-            if n > MAX_BODY:
-                raise RatingError("request body too large")
-            try:
-                body = json.loads(self.rfile.read(n) or b"{}")
-            except json.JSONDecodeError as e:
-                raise RatingError(f"request body is not JSON: {e}") from None
-            if path != "/rate" or not isinstance(body, dict):
-                raise RatingError(f"expected POST /rate with a JSON object, got {path!r}")
+            body = self._json_body(MAX_BODY, RatingError)
+            if path != "/rate":
+                raise RatingError(f"expected POST /rate, got {path!r}")
             self._json(self.server.session.rate(str(body.get("item_id")), body.get("rating")))
         except RatingError as e:
             self._json({"error": str(e)}, 400)

@@ -44,7 +44,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from http import HTTPStatus
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from http.server import ThreadingHTTPServer
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +55,7 @@ from wsp_data.platforms.maniskill.env import (
     GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, Observation, _np, euler_xyz,
 )
 from wsp_data.schema import ACTION_DIM, FPS
+from wsp_eval.local_http import JsonRequestHandler
 from wsp_data.platforms.maniskill.experts import ExpertSource, rotated, task_spec
 from wsp_data.platforms.maniskill.skills import SkillScript
 
@@ -455,36 +456,11 @@ class TeleopServer(ThreadingHTTPServer):
             self.sim.shutdown(wait=True)
 
 
-class _Handler(BaseHTTPRequestHandler):
+class _Handler(JsonRequestHandler):
     server: TeleopServer
-    protocol_version = "HTTP/1.1"
-
-    def log_message(self, format, *args) -> None:  # noqa: A002 - quiet: one request per command
-        pass
-
-    def _send(self, status: int, body: bytes, ctype: str) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", ctype)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.end_headers()
-        self.wfile.write(body)
-
-    def _json(self, obj, status: int = 200) -> None:
-        self._send(status, json.dumps(obj).encode(), "application/json")
 
     def _body(self) -> dict:
-        n = int(self.headers.get("Content-Length") or 0)
-        if n > 65536:
-            raise TeleopError("request body too large")
-        raw = self.rfile.read(n) if n else b""
-        try:
-            obj = json.loads(raw or b"{}")
-        except json.JSONDecodeError as e:
-            raise TeleopError(f"request body is not JSON: {e}") from None
-        if not isinstance(obj, dict):
-            raise TeleopError("request body must be a JSON object")
-        return obj
+        return self._json_body(65536, TeleopError)
 
     def do_GET(self) -> None:  # noqa: N802
         path = self.path.split("?", 1)[0]
