@@ -33,8 +33,8 @@ import pyarrow.parquet as pq
 from wsp_eval.reference import episodes, reference_frames
 from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, RELEASE_JSON
 from wsp_eval.suites.reference import InstanceReference
-from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, centroid_path, motion_gate, project, query_grid,
-                               scoring_frames, t4_score, track)
+from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, motion_gate, object_path, project,
+                               scoring_frames, t4_score)
 
 POSES = "observation.object_poses"
 IN_VIEW_MARGIN = 12  # px: another object counts when its frame-0 position is this far inside the frame
@@ -75,8 +75,7 @@ def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference"
         # The query sits on the object's frame-0 position in *this* rollout: a spatial-proximity reference moved
         # the object, so in its source rollout the object starts elsewhere than `object_pixel_256`.
         query = np.asarray(row["object_pixel_256"]) if role == "reference" and k == evaluated else truth[0]
-        tracks = track(grey, query_grid(query), anchored=True)
-        path = centroid_path(tracks, anchored=True)
+        tracks, path = object_path(grey, query)
         visible = tracks.visible.any(axis=1)
         err = np.linalg.norm((path - path[0]) - (truth - truth[0]), axis=1)[visible]
         rec = {"instance_id": row["instance_id"], "role": role, "task": row["task"],

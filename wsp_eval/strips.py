@@ -66,10 +66,9 @@ def _tiles(frames: np.ndarray, mark: tuple[float, float] | None, path: np.ndarra
 
 def tracked_path(frames: np.ndarray, object_px) -> np.ndarray:
     """T4's object centroid through a video (`wsp_eval.tracking`, default tracker), scoring-frame pixels."""
-    from wsp_eval.tracking import centroid_path, query_grid, scoring_frames, track
+    from wsp_eval.tracking import object_path, scoring_frames
 
-    tracks = track(scoring_frames(frames), query_grid(np.asarray(object_px, float)), anchored=True)
-    return centroid_path(tracks, anchored=True)
+    return object_path(scoring_frames(frames), np.asarray(object_px, float))[1]
 
 
 def write_strips(records: list[dict], rows: dict[str, list[dict]], release: Path, submission: Path,

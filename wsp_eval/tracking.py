@@ -202,10 +202,17 @@ class ObjectMotion:
 TrackFn = Callable[..., "Tracks"]  # (video, points, *, anchored) -> Tracks: `track` or a backend's
 
 
+def object_path(grey: np.ndarray, object_px: np.ndarray, track_fn: TrackFn | None = None
+                ) -> tuple[Tracks, np.ndarray]:
+    """The 3×3 grid around `object_px` tracked (anchored) through a scoring-frame video, and its centroid path
+    (T, 2)."""
+    tracks = (track_fn or track)(grey, query_grid(object_px), anchored=True)
+    return tracks, centroid_path(tracks, anchored=True)
+
+
 def object_motion(grey: np.ndarray, object_px: np.ndarray, track_fn: TrackFn | None = None) -> ObjectMotion:
     """d = max over frames of ‖centroid_t − centroid_0‖ for the 3×3 grid around `object_px` (anchored)."""
-    tracks = (track_fn or track)(grey, query_grid(object_px), anchored=True)
-    c = centroid_path(tracks, anchored=True)
+    tracks, c = object_path(grey, object_px, track_fn)
     d = float(np.linalg.norm(c - c[0], axis=1).max())
     return ObjectMotion(d, float(tracks.visible.any(axis=1).mean()), int(tracks.visible[0].sum()))
 
