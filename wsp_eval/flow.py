@@ -152,8 +152,13 @@ def rmfa_windows(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: 
     return [rmfa_window_score(f_hat[a:b], f_star[a:b], masks[a:b], tau, c) for a, b in windows(len(f_star))]
 
 
+def mean_window_score(per_window: list[float | None]) -> float | None:
+    """Instance RMFA from `rmfa_windows`: mean S_w over the windows with non-empty M; None when there is none."""
+    scores = [s for s in per_window if s is not None]
+    return float(np.mean(scores)) if scores else None
+
+
 def rmfa_score(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
                ) -> float | None:
     """Instance RMFA: mean S_w over the windows with non-empty M; None when no window is scorable."""
-    scores = [s for s in rmfa_windows(f_hat, f_star, masks, tau, c) if s is not None]
-    return float(np.mean(scores)) if scores else None
+    return mean_window_score(rmfa_windows(f_hat, f_star, masks, tau, c))

@@ -30,10 +30,14 @@ def ratio(videos: dict[str, tuple[np.ndarray, float]]) -> float | None:
     return None if d_ol == 0 else aligned_mse(g0, gs, f0, fs) / d_ol
 
 
+def ratio_score(r: float | None, r_star: float) -> float:
+    """S from r (`ratio`): 0 when r is undefined."""
+    return 0.0 if r is None else calibration(r, r_star)
+
+
 def seed_score(videos: dict[str, tuple[np.ndarray, float]], r_star: float) -> float:
     """S for one seed; `videos` maps role → (frames, fps) of the generated rollouts."""
-    r = ratio(videos)
-    return 0.0 if r is None else calibration(r, r_star)
+    return ratio_score(ratio(videos), r_star)
 
 
 def instance_score(per_seed: list[dict[str, tuple[np.ndarray, float]]], r_star: float) -> float:
@@ -48,7 +52,7 @@ def prepare(ref, backends) -> float:
 def score_seed(r_star: float, videos, backends) -> tuple[float, dict]:
     """The engine's interface: S on the 0–100 scale of the suite score, with r and r* (the report's evidence)."""
     r = ratio(videos)
-    return (0.0 if r is None else 100.0 * calibration(r, r_star)), {"r": r, "r_star": r_star}
+    return 100.0 * ratio_score(r, r_star), {"r": r, "r_star": r_star}
 
 
 def groups(rows: list[dict]) -> list[str]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.flow import clip_duration, reference_flows, rmfa_windows, video_flows
+from wsp_eval.flow import clip_duration, mean_window_score, reference_flows, rmfa_windows, video_flows
 
 SUITE, TITLE = "t2", "Global trajectory coverage"
 ROLES = ("reference",)
@@ -40,8 +40,8 @@ def rmfa(prepared: _Reference, frames: np.ndarray, fps: float, backend) -> tuple
     duration = min(prepared.duration, clip_duration(len(frames), fps))
     ref = prepared.flows(duration)
     per_window = rmfa_windows(video_flows(frames, fps, duration, backend), ref.flows, ref.masks)
-    scored = [s for s in per_window if s is not None]
-    return (float(np.mean(scored)) if scored else 0.0), {
+    score = mean_window_score(per_window)
+    return (0.0 if score is None else score), {
         "common_seconds": duration, "flows": len(ref.flows),
         "windows": [None if s is None else round(s, 2) for s in per_window]}
 
