@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wsp_eval.score import bootstrap_means
 from wsp_eval.suites import SCORERS
 
 BOOTSTRAP = 2000
@@ -90,14 +91,8 @@ def _suite_diffs(a: Entry, b: Entry, config: str, rng: np.random.Generator) -> n
     if len(shared) < 2:
         return None
     d = np.array([sa[i][0] - sb[i][0] for i in shared])
-    if not SCORERS[config.split("_", 1)[0]].BALANCED:
-        return d[rng.integers(0, len(d), (BOOTSTRAP, len(d)))].mean(axis=1)
-    groups = [sa[i][1] for i in shared]
-    parts = []
-    for g in dict.fromkeys(groups):
-        x = d[[k for k, v in enumerate(groups) if v == g]]
-        parts.append(x[rng.integers(0, len(x), (BOOTSTRAP, len(x)))].mean(axis=1))
-    return np.mean(parts, axis=0)
+    balanced = SCORERS[config.split("_", 1)[0]].BALANCED
+    return bootstrap_means(d, [sa[i][1] for i in shared] if balanced else None, rng, BOOTSTRAP)
 
 
 def _configs(entry: Entry, platform: str) -> list[str]:

@@ -266,15 +266,16 @@ def _ci(samples: np.ndarray) -> list[float] | None:
     return None if samples is None else [float(np.percentile(samples, 2.5)), float(np.percentile(samples, 97.5))]
 
 
-def _bootstrap(scores: np.ndarray, groups: list[str] | None, rng: np.random.Generator) -> np.ndarray:
-    """BOOTSTRAP resampled suite scores: plain means, or (balanced) means of per-group resampled means."""
+def bootstrap_means(scores: np.ndarray, groups: list[str] | None, rng: np.random.Generator,
+                    resamples: int = BOOTSTRAP) -> np.ndarray:
+    """`resamples` resampled suite scores: plain means, or (balanced) means of per-group resampled means."""
     if groups is None:
-        idx = rng.integers(0, len(scores), (BOOTSTRAP, len(scores)))
+        idx = rng.integers(0, len(scores), (resamples, len(scores)))
         return scores[idx].mean(axis=1)
     parts = []
     for g in dict.fromkeys(groups):
         s = scores[[i for i, x in enumerate(groups) if x == g]]
-        parts.append(s[rng.integers(0, len(s), (BOOTSTRAP, len(s)))].mean(axis=1))
+        parts.append(s[rng.integers(0, len(s), (resamples, len(s)))].mean(axis=1))
     return np.mean(parts, axis=0)
 
 
@@ -289,7 +290,7 @@ def _group_rows(scores: np.ndarray, groups: list[str], rng: np.random.Generator)
     for g in sorted(set(groups), key=lambda x: (not x.isdigit(), int(x) if x.isdigit() else 0, x)):
         s = scores[[i for i, x in enumerate(groups) if x == g]]
         out.append({"group": g, "score": float(s.mean()), "n": len(s),
-                    "ci": _ci(_bootstrap(s, None, rng)) if len(s) > 1 else None})
+                    "ci": _ci(bootstrap_means(s, None, rng)) if len(s) > 1 else None})
     return out
 
 
@@ -321,7 +322,7 @@ def aggregate(records: list[dict], rows: dict[str, list[dict]], configs: list[st
             continue
         scores = np.array([r["score"] for r in recs])
         groups = module.groups(rows[config])
-        boot = _bootstrap(scores, groups if module.BALANCED else None, rng)
+        boot = bootstrap_means(scores, groups if module.BALANCED else None, rng)
         entry = {"config": config, "title": module.TITLE, "score": _suite_score(scores, groups, module.BALANCED),
                  "ci": _ci(boot), "n": len(recs), "missing_rollouts": sum(s.get("missing", False) for r in recs
                                                                          for s in r["seeds"]),
