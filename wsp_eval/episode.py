@@ -87,9 +87,8 @@ class EpisodeContext:
 
     def actions(self, key: str = "action") -> np.ndarray:
         """The episode's action stream `key` (`action`, or `action.ee` / `action.joint`), float32 (T, D)."""
-        if self.inputs_only:
-            return self._cached(f"actions/{key}", lambda: _input_actions(self.config_dir, self.episode_index, key))
-        return self._cached(f"actions/{key}", lambda: episode_actions(self.config_dir, self.episode_index, key))
+        read = _input_actions if self.inputs_only else episode_actions
+        return self._cached(f"actions/{key}", lambda: read(self.config_dir, self.episode_index, key))
 
     def _full_release(self, what: str) -> None:
         if self.inputs_only:
