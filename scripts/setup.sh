@@ -2,16 +2,23 @@
 # Idempotent set-up: system packages (Mesa 25 lavapipe and OSMesa, ffmpeg, Chromium + chromedriver for the
 # teleop page's browser test), a Python 3.12 venv in .venv with the pinned packages plus LIBERO's stack
 # (requirements/libero-no-deps.txt, without dependencies), and a check that SAPIEN and MuJoCo each render
-# one frame. Re-running after success takes seconds.
+# one frame. Re-running after success takes seconds. It prints a few status lines; apt's and pip's output goes
+# to .wsp-setup.log (its last lines are printed when a step fails).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
 STAMP="$VENV/.wsp-setup-stamp"
 KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" "$ROOT/requirements/libero-no-deps.txt" | sha256sum | cut -c1-16)"
+LOG="$ROOT/.wsp-setup.log"
 log() { printf '[wsp setup] %s\n' "$*" >&2; }
 die() { printf '[wsp setup] error: %s\n' "$*" >&2; exit 1; }
-# pip, minus the machine-level notes about unused local index folders
-pip_q() { "$VENV/bin/python" -m pip "$@" 2> >(grep -v -E "^WARNING: (Location '|Skipping opencv)" >&2); }
+# Run a step with its output in $LOG; on failure print the step and the log's last lines.
+logged() {
+  printf '\n=== %s: %s\n' "$(date -u +%FT%TZ)" "$*" >>"$LOG"
+  "$@" >>"$LOG" 2>&1 || { printf '[wsp setup] error: step failed: %s\nlast lines of %s:\n' "$*" "$LOG" >&2
+                          tail -n 25 "$LOG" >&2; exit 1; }
+}
+pip_q() { logged "$VENV/bin/python" -m pip "$@"; }
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else die "need root for: $*"; fi; }
 
@@ -45,9 +52,9 @@ system_packages() {
     printf 'Types: deb\nURIs: %s\nSuites: bookworm-backports\nComponents: main\nSigned-By: %s\n' "$uri" "$key" | as_root tee "$src" >/dev/null
   fi
   log "installing mesa-vulkan-drivers and libosmesa6 (Mesa 25, bookworm-backports), ffmpeg, chromium and chromium-driver"
-  as_root apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libosmesa6 >/dev/null
-  DEBIAN_FRONTEND=noninteractive as_root apt-get install -y -qq ffmpeg chromium chromium-driver >/dev/null
+  logged as_root apt-get update
+  logged as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -t bookworm-backports mesa-vulkan-drivers libosmesa6
+  logged as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y ffmpeg chromium chromium-driver
   mesa_ok || die "mesa-vulkan-drivers >= 25 with lvp_icd.json is still missing after install"
 }
 
@@ -63,23 +70,22 @@ find_python() {
 python_env() {
   if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$KEY" ]; then return; fi
   local py; py="$(find_python)"
-  [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; "$py" -m venv "$VENV"; }
-  log "installing pinned packages (first run downloads torch, a few minutes)"
-  pip_q install -q --upgrade pip
-  pip_q install -q -e "$ROOT[all]"
+  [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; logged "$py" -m venv "$VENV"; }
+  log "installing pinned packages (first run downloads torch, a few minutes; pip's output: $LOG)"
+  pip_q install --upgrade pip
+  pip_q install -e "$ROOT[all]"
   log "installing LIBERO (hf-libero, robosuite 1.4.0, MuJoCo, scene assets) without dependencies"
-  pip_q install -q --no-deps -r "$ROOT/requirements/libero-no-deps.txt"
+  pip_q install --no-deps -r "$ROOT/requirements/libero-no-deps.txt"
   local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"
   if [ "$n" != 1 ]; then
-    log "more than one OpenCV distribution present; keeping only opencv-python-headless"
-    pip_q uninstall -q -y opencv-python opencv-contrib-python opencv-contrib-python-headless || true
-    pip_q install -q --force-reinstall --no-deps "$("$VENV/bin/python" -m pip list --format=freeze 2>/dev/null | grep -i '^opencv-python-headless==')"
+    pip_q uninstall -y opencv-python opencv-contrib-python opencv-contrib-python-headless
+    pip_q install --force-reinstall --no-deps "$("$VENV/bin/python" -m pip list --format=freeze 2>/dev/null | grep -i '^opencv-python-headless==')"
   fi
 }
 
 system_packages
 python_env
 log "checking that SAPIEN and MuJoCo (LIBERO) each render one frame"
-"$VENV/bin/python" -m wsp_data.platforms.render_check || die "a simulator could not render a frame (see above)"
+logged "$VENV/bin/python" -m wsp_data.platforms.render_check
 echo "$KEY" > "$STAMP"
 log "ready: $VENV"

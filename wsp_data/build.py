@@ -23,9 +23,10 @@ from tqdm import tqdm
 
 from wsp_data.builders import BUILDERS, BuildConfig, Kept, builder_class
 from wsp_data.release import ReleaseError, load_release, record_build, write_release
-from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, RELEASE_JSON, STAGING_DIR, scene_seed
+from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR, scene_seed
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
 from wsp_data.writer import write_config
+from wsp_eval.console import library_output_to, terminal
 
 
 class BuildError(RuntimeError):
@@ -44,6 +45,7 @@ class BuildResult:
     rendered_steps: int
     report: dict | None = None
     up_to_date: bool = False  # the config was already assembled from this very build config
+    log: Path | None = None  # library, simulator and encoder output of this build
 
 
 # -- output folder checks ------------------------------------------------------------------------------
@@ -52,7 +54,8 @@ def prepare_output(out: Path) -> Path:
     out = Path(out).expanduser().resolve()
     if out.exists() and not out.is_dir():
         raise BuildError(f"{out}: exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not (out / RELEASE_JSON).exists() and not (out / STAGING_DIR).exists():
+    ours = {RELEASE_JSON, STAGING_DIR, LOG_DIR}
+    if out.exists() and any(out.iterdir()) and not any((out / name).exists() for name in ours):
         raise BuildError(f"{out}: folder is not empty and is not a WorldSimProbe release; choose an empty or new folder")
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -190,17 +193,21 @@ def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
     }
 
 
-def format_report(report: dict) -> str:
+def format_report(report: dict, max_rows: int = 6) -> str:
+    """The build's terminal summary: one line, the drop reasons, and the tasks that dropped proposals (worst
+    first, at most `max_rows`); the full per-task and per-group tables are in build_report.json."""
     lines = [f"{report['config']}: kept {report['kept']} / {report['requested']} requested, "
              f"{report['proposed']} proposals (acceptance {report['acceptance_rate']:.0%}); rendered "
              f"{report['rendered_steps']} steps, validation without rendering avoided {report['rendered_steps_avoided']}"]
-    for title, table in (("task", report["per_task"]), ("group", report["per_group"])):
-        if not table:
-            continue
-        lines.append(f"{title:<18} {'proposed':>8} {'kept':>5} {'accept':>7}  dropped by reason")
-        for name, t in table.items():
-            reasons = ", ".join(f"{k}={v}" for k, v in t["dropped"].items()) or "-"
-            lines.append(f"{name:<18} {t['proposed']:>8} {t['kept']:>5} {t['acceptance_rate']:>7.0%}  {reasons}")
+    if report["dropped"]:
+        lines.append("dropped: " + ", ".join(f"{k}={v}" for k, v in report["dropped"].items()) + "; by task:")
+    lossy = sorted(((t["acceptance_rate"], name, t) for name, t in report["per_task"].items() if t["dropped"]),
+                   key=lambda x: (x[0], x[1]))
+    for rate, name, t in lossy[:max_rows]:
+        reasons = ", ".join(f"{k}={v}" for k, v in t["dropped"].items())
+        lines.append(f"  {name}: kept {t['kept']} of {t['proposed']} ({rate:.0%}); {reasons}")
+    if len(lossy) > max_rows:
+        lines.append(f"  … {len(lossy) - max_rows} more task(s) with drops")
     if report["exhausted_slots"]:
         lines.append(f"{len(report['exhausted_slots'])} slot(s) found no valid instance in "
                      f"{report['build_config']['max_attempts']} attempts: {report['exhausted_slots'][:10]}")
@@ -235,22 +242,24 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
         existing = load_release(out)["configs"].get(config.name)
         if existing and existing["build_config"] == config.to_json() and (out / config.name).exists():
             return BuildResult(config, out, 0, 0, 0, False, 0.0, 0, up_to_date=True)
-    staging = _open_staging(out, config, restart)
-    t0 = time.perf_counter()
-    todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
-    decided = kept = steps = 0
-    bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="inst", disable=not progress, file=sys.stderr)
-    for record in _run_slots(config, staging, todo, workers):
-        decided += 1
-        kept += record.kept
-        steps += sum(a["rendered_steps"] for a in record.attempts)
-        bar.update(1)
-        bar.set_postfix(kept=kept, dropped=decided - kept)
-    bar.close()
-    remaining = sum(not staging.is_decided(k) for k in range(config.count))
-    report = assemble(config, out, staging) if remaining == 0 else None
+    log = out / LOG_DIR / f"build_{config.name}.log"
+    with library_output_to(log):
+        staging = _open_staging(out, config, restart)
+        t0 = time.perf_counter()
+        todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
+        decided = kept = steps = 0
+        bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="inst", disable=not progress, file=terminal())
+        for record in _run_slots(config, staging, todo, workers):
+            decided += 1
+            kept += record.kept
+            steps += sum(a["rendered_steps"] for a in record.attempts)
+            bar.update(1)
+            bar.set_postfix(kept=kept, dropped=decided - kept)
+        bar.close()
+        remaining = sum(not staging.is_decided(k) for k in range(config.count))
+        report = assemble(config, out, staging) if remaining == 0 else None
     return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
-                       steps, report)
+                       steps, report, log=log)
 
 
 def default_workers() -> int:

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from wsp_data.platforms import KITS
 from wsp_data.schema import DEFAULT_RELEASE_NAME, SEED_BASE, SUITES
+from wsp_eval import console
 from wsp_eval.registry import PluginError
 
 PAPER_COUNTS = {  # paper Table S3 (SPEC §3)
@@ -215,10 +216,10 @@ def cmd_build(args) -> int:
           f"({per:.0f} ms per rendered step, all costs included)")
     if result.assembled:
         print(format_report(result.report))
-        from wsp_data.release import describe
+        from wsp_data.schema import BUILD_REPORT
 
-        print()
-        print(describe(result.release))
+        print(f"report: {result.release / config.name / BUILD_REPORT}; library output: {result.log}; "
+              f"the release: wsp info {result.release}")
     else:
         print(f"{result.remaining} slot(s) of {config.name} are not decided yet (other shards); run the remaining "
               f"shards, then any `wsp build` with the same arguments assembles the config")
@@ -313,7 +314,8 @@ def _score(submission: Path, release: Path, out: Path, args) -> dict:
 def cmd_score(args) -> int:
     from wsp_eval.report import baseline_table
 
-    report = _score(args.submission, _release_or_error(args.release), args.out, args)
+    with console.library_output_to(args.out / console.LOG_NAME):
+        report = _score(args.submission, _release_or_error(args.release), args.out, args)
     print(baseline_table({report["submission"]["model"]: report}))
     print(f"\nreports: {args.out / 'report.md'}, {args.out / 'report.html'}, {args.out / 'report.json'}")
     return 0
@@ -329,13 +331,14 @@ def cmd_calibrate(args) -> int:
     if unknown:
         raise CliError(f"unknown baseline(s) {', '.join(unknown)}; known: {', '.join(BASELINES)}")
     reports = {}
-    for name in names:
-        sub = args.out / "submissions" / name
-        try:
-            write_baseline(name, release, sub, seeds=tuple(args.seeds), progress=not args.quiet)
-        except BaselineError as e:
-            raise CliError(str(e)) from None
-        reports[name] = _score(sub, release, args.out / "reports" / name, args)
+    with console.library_output_to(args.out / console.LOG_NAME):
+        for name in names:
+            sub = args.out / "submissions" / name
+            try:
+                write_baseline(name, release, sub, seeds=tuple(args.seeds), progress=not args.quiet)
+            except BaselineError as e:
+                raise CliError(str(e)) from None
+            reports[name] = _score(sub, release, args.out / "reports" / name, args)
     from wsp_eval import leaderboard
 
     (args.out / "baselines.md").write_text(baseline_table(reports) + "\n")
@@ -443,6 +446,7 @@ def main(argv: list[str] | None = None) -> int:
         return commands[args.command](args)
     except (CliError, PluginError) as e:
         print(f"wsp: error: {e}", file=sys.stderr)
+        _print_failure_hint()
         return 2
     except ModuleNotFoundError as e:
         if (e.name or "").split(".")[0] not in BUILD_MODULES:
@@ -455,6 +459,15 @@ def main(argv: list[str] | None = None) -> int:
         print("wsp: interrupted; finished work is kept (staged instances, written videos, cached scores): re-run "
               "the same command to resume", file=sys.stderr)
         return 130
+    except Exception:
+        _print_failure_hint()
+        raise
+
+
+def _print_failure_hint() -> None:
+    hint = console.failure_hint()
+    if hint:
+        print(hint, file=sys.stderr)
 
 
 if __name__ == "__main__":

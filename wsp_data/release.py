@@ -19,7 +19,8 @@ import pyarrow.parquet as pq
 import wsp_data
 from wsp_data.platforms import kit
 from wsp_data.schema import (
-    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, MAX_OBJECTS, RELEASE_JSON, SEED_BASE, SEED_SPAN, STAGING_DIR,
+    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, LOG_DIR, MAX_OBJECTS, RELEASE_JSON, SEED_BASE, SEED_SPAN,
+    STAGING_DIR,
 )
 from wsp_eval.release_format import BENCHMARK_VERSION, ReleaseError, load_release
 
@@ -95,7 +96,7 @@ def record_build(root: Path, config: str, build_config: dict) -> None:
 
 
 def _ignored(rel: Path) -> bool:
-    return rel.parts[0] == STAGING_DIR or rel.parts[0].endswith(".writing") or rel.parts[0] == ".cache"
+    return rel.parts[0] in (STAGING_DIR, LOG_DIR, ".cache") or rel.parts[0].endswith(".writing")
 
 
 def _render_card(root: Path, release: dict, card_configs: list[dict]) -> None:

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build side and tests import them from here)
     BUILD_REPORT, CARD, CODEBASE_VERSION, CONFIG_NAME, CROISSANT, DEFAULT_RELEASE_NAME, EPISODE_COLUMNS, EPISODE_ID,
-    FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, MASK_KEY, MAX_OBJECTS, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR, SUITES,
+    FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, LOG_DIR, MASK_KEY, MAX_OBJECTS, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR,
+    SUITES,
 )
 
 # ManiSkill's native streams (SPEC §2): the platform module imports these, never the reverse.

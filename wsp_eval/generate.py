@@ -29,6 +29,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
+from wsp_eval.console import terminal
 from wsp_eval.episode import EpisodeContext
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES
 from wsp_eval.submission import SUBMISSION_JSON, VIDEO_NAME, test_configs
@@ -97,7 +98,7 @@ def write_submission(produce: Producer, release: Path, out: Path, *, seeds: Sequ
     written = skipped = 0
     seconds = 0.0
     total = len(seeds) * sum(len(ids) for c in configs for ids in _column(release, c, "episode_ids"))
-    with tqdm(total=total, desc=name, unit="video", disable=not progress, file=sys.stderr) as bar:
+    with tqdm(total=total, desc=name, unit="video", disable=not progress, file=terminal()) as bar:
         for ctx in _episodes(release, configs, seeds[0]):
             for seed in seeds:
                 path = out / ctx.config / ctx.episode_id / VIDEO_NAME.format(seed=seed)

@@ -26,6 +26,7 @@ FIRST_FRAME = "inputs/first_frames/{episode_id}.png"  # frame 0 of each scored e
 INPUT_ACTIONS = "inputs/actions.parquet"  # one row per scored episode: episode_index, episode_id, action columns
 INPUTS_ONLY = "inputs_only"  # release.json key, true in an inputs-only release
 STAGING_DIR = ".wsp-staging"  # per config, under the release; removed once the config is assembled
+LOG_DIR = ".wsp-logs"  # library, simulator and encoder output of builds, under the release; not in release.json
 CONFIG_NAME = "{suite}_{platform}"  # e.g. t1_maniskill
 EPISODE_ID = "episode_{index:06d}"  # submission path component: <config>/<episode_id>/seed<k>.mp4
 INSTANCE_ID = "{config}/{slot:06d}"

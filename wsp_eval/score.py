@@ -34,6 +34,7 @@ import pyarrow.parquet as pq
 
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
+from wsp_eval.console import terminal
 from wsp_eval.release_format import INSTANCES, RELEASE_JSON, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
@@ -220,7 +221,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy)
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
-    bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress)
+    bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress,
+               file=terminal())
     with open(out / CACHE, "a") as cache:
         def keep(record: dict) -> None:
             done[(record["config"], record["instance_id"])] = record
