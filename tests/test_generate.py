@@ -114,3 +114,63 @@ def test_load_model(tmp_path, monkeypatch):
                           ("math:pi", "'pi' is a float, not callable")]:
         with pytest.raises(GenerateError, match=message):
             load_model(spec)
+
+
+class BatchedShift:
+    """The shift model behind the batched call, recording each batch it is sent."""
+    batch_size = 3
+
+    def __init__(self, fail_after: int | None = None):
+        self.batches: list[list] = []
+        self.fail_after = fail_after
+
+    def __call__(self, requests):
+        if self.fail_after is not None and len(self.batches) == self.fail_after:
+            raise RuntimeError("killed")
+        self.batches.append(requests)
+        return [shift_model(*r) for r in requests]
+
+
+def test_batched_model_writes_the_same_submission(t1_release, tmp_path):
+    generate(shift_model, t1_release, tmp_path / "single", seeds=(0, 1), name="shift", progress=False)
+    model = BatchedShift()
+    result = generate(model, t1_release, tmp_path / "batched", seeds=(0, 1), name="shift", progress=False)
+    n = 2 * episode_count(t1_release)
+    assert result.written == n and [len(b) for b in model.batches] == [3] * (n // 3) + ([n % 3] if n % 3 else [])
+    assert model.batches[0][1].seed == 1 and model.batches[0][0].fps == 20  # episode 0 seed 0, then seed 1
+    for video in (tmp_path / "single").rglob("*.mp4"):  # byte-identical videos, either interface
+        assert video.read_bytes() == (tmp_path / "batched" / video.relative_to(tmp_path / "single")).read_bytes()
+    assert validate(tmp_path / "batched", t1_release) == []
+
+
+def test_killed_batched_run_resumes_and_bad_batches_are_named(t1_release, tmp_path):
+    with pytest.raises(RuntimeError, match="killed"):
+        generate(BatchedShift(fail_after=1), t1_release, tmp_path, seeds=(0,), name="shift", progress=False)
+    assert len(list(tmp_path.rglob("*.mp4"))) == 3  # the first batch; the batch in flight is lost, no partial file
+    result = generate(BatchedShift(), t1_release, tmp_path, seeds=(0,), name="shift", progress=False)
+    assert (result.written, result.skipped) == (episode_count(t1_release) - 3, 3)
+    assert validate(tmp_path, t1_release) == []
+
+    class ShortBatch(BatchedShift):
+        def __call__(self, requests):
+            return super().__call__(requests)[:-1]
+
+    with pytest.raises(GenerateError, match=r"asked for 3 video\(s\), returned 2 item\(s\)"):
+        generate(ShortBatch(), t1_release, tmp_path / "short", seeds=(0,), name="m", progress=False)
+    bad = BatchedShift()
+    bad.batch_size = 0
+    with pytest.raises(GenerateError, match="batch_size 0: expected an integer from 1 to"):
+        generate(bad, t1_release, tmp_path / "bad", seeds=(0,), name="m", progress=False)
+
+
+def test_the_readme_example_adapter_runs(t1_release, tmp_path, monkeypatch):
+    """docs/example_adapter.py (shown in the README) loads by name and writes a valid submission."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)
+    model = load_model("docs.example_adapter:model")
+    assert model.batch_size == 8
+    generate(model, t1_release, tmp_path, seeds=(0,), name="example", progress=False)
+    assert validate(tmp_path, t1_release) == []
+    assert (root / "docs" / "example_adapter.py").read_text().strip() in (root / "README.md").read_text()

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from wsp_eval.episode import BaselineError, EpisodeContext, source_episode_index  # noqa: F401  (re-exported)
-from wsp_eval.generate import GenerateError, write_submission
+from wsp_eval.generate import GenerateError, per_episode, write_submission
 from wsp_eval.registry import Registry
 
 BLUR_SIGMA_PX = 2.0  # `blur`: standard deviation of the Gaussian kernel, pixels
@@ -153,7 +153,7 @@ def write_baseline(name: str, release: Path, out: Path, seeds: tuple[int, ...] =
     name, BaselineError for anything else that stops it."""
     baseline = BASELINES[name]
     try:
-        result = write_submission(baseline, release, out, seeds=seeds, name=f"baseline:{name}",
+        result = write_submission(per_episode(baseline), release, out, seeds=seeds, name=f"baseline:{name}",
                                   progress=progress)
     except GenerateError as e:
         raise BaselineError(str(e)) from None

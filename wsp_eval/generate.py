@@ -1,9 +1,16 @@
 """Run a world model over a release and write a submission (DESIGN "Submission layout").
 
-A model is any callable `model(first_frame, actions, fps, seed) -> frames`: `first_frame` is the reference
-frame 0 (H, W, 3) uint8, `actions` the episode's action stream float32 (T, D) (column `action`, or
-`action.ee`), `fps` the release's frame rate and `seed` the generation seed; it returns (N, H, W, 3) frames
-(uint8, or numbers in [0, 255]), N the episode's reference horizon. `load_model("module:callable")` finds one.
+A model is either
+- per-episode: any callable `model(first_frame, actions, fps, seed) -> frames`: `first_frame` is the
+  reference frame 0 (H, W, 3) uint8, `actions` the episode's action stream float32 (T, D) (column `action`, or
+  `action.ee`), `fps` the release's frame rate and `seed` the generation seed; it returns (N, H, W, 3) frames
+  (uint8, or numbers in [0, 255]), N = T the episode's reference horizon (one action row per frame: the
+  last row repeats the previous action); or
+- batched: a callable with an integer attribute `batch_size` (set it with the `batched(n)` decorator, or on
+  a class) called as `model(requests) -> list of frames`, `requests` a list of at most `batch_size`
+  `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
+  in order.
+`load_model("module:callable")` finds one.
 
 `write_submission` is the loop shared with the calibration baselines: each video is written to a temp name
 in its folder and renamed into place, so a killed run never leaves a truncated mp4, and the same call run
@@ -22,6 +29,7 @@ import platform
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
+from typing import NamedTuple
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -37,6 +45,34 @@ from wsp_eval.video import write_video
 
 Model = Callable[[np.ndarray, np.ndarray, float, int], np.ndarray]
 Producer = Callable[[EpisodeContext], np.ndarray]
+BatchProducer = Callable[[list[EpisodeContext]], list[np.ndarray]]
+MAX_BATCH = 1024
+
+
+class Request(NamedTuple):
+    """One video a batched model is asked for (the per-episode call's arguments)."""
+    first_frame: np.ndarray  # (H, W, 3) uint8, the reference frame 0
+    actions: np.ndarray  # (T, D) float32
+    fps: float
+    seed: int
+
+
+def batched(batch_size: int) -> Callable[[Callable], Callable]:
+    """Mark `fn(requests: list[Request]) -> list[frames]` as a batched model taking up to `batch_size` requests."""
+    def mark(fn: Callable) -> Callable:
+        fn.batch_size = batch_size
+        return fn
+    return mark
+
+
+def batch_size_of(model: object) -> int | None:
+    """The model's batch size if it is a batched model, None for a per-episode one (GenerateError if invalid)."""
+    size = getattr(model, "batch_size", None)
+    if size is None:
+        return None
+    if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_BATCH:
+        raise GenerateError(f"model batch_size {size!r}: expected an integer from 1 to {MAX_BATCH}")
+    return size
 
 
 class GenerateError(RuntimeError):
@@ -74,22 +110,37 @@ def load_model(spec: str) -> Model:
 def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (0, 1, 2),
              configs: Sequence[str] | None = None, name: str, action_key: str = "action",
              progress: bool = True) -> GenerateResult:
-    """Run `model` on every scored episode × seed of `release` (or of `configs`) and write, or resume, the
-    submission of model `name` in `out`."""
-    def produce(ctx: EpisodeContext) -> np.ndarray:
+    """Run `model` (per-episode or batched, see the module doc) on every scored episode × seed of `release` (or
+    of `configs`) and write, or resume, the submission of model `name` in `out`."""
+    def request(ctx: EpisodeContext) -> Request:
         try:
             actions = ctx.actions(action_key)
         except ValueError as e:
             raise GenerateError(str(e)) from None
-        return model(ctx.first_frame().copy(), actions.copy(), ctx.fps, ctx.seed)
+        return Request(ctx.first_frame().copy(), actions.copy(), ctx.fps, ctx.seed)
 
-    return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress)
+    size = batch_size_of(model)
+    if size is None:
+        def produce(ctxs: list[EpisodeContext]) -> list[np.ndarray]:
+            return [model(*request(ctx)) for ctx in ctxs]
+    else:
+        def produce(ctxs: list[EpisodeContext]) -> list[np.ndarray]:
+            frames = model([request(ctx) for ctx in ctxs])
+            if not isinstance(frames, (list, tuple)) or len(frames) != len(ctxs):
+                got = f"{len(frames)} item(s)" if isinstance(frames, (list, tuple)) else f"a {type(frames).__name__}"
+                raise GenerateError(f"batched model: asked for {len(ctxs)} video(s), returned {got}; a batched model "
+                                    "returns a list with one frame array per request, in order")
+            return list(frames)
+
+    return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress,
+                            batch_size=size or 1)
 
 
-def write_submission(produce: Producer, release: Path, out: Path, *, seeds: Sequence[int],
-                     configs: Sequence[str] | None = None, name: str, progress: bool) -> GenerateResult:
-    """Write `produce(ctx)` for every scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`,
-    skipping videos already there, then submission.json."""
+def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds: Sequence[int],
+                     configs: Sequence[str] | None = None, name: str, progress: bool, batch_size: int = 1) -> GenerateResult:
+    """Write `produce(contexts)` (a list of frames per list of up to `batch_size` episode contexts) for every
+    scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`, skipping videos already there, then
+    submission.json."""
     release, out = Path(release), Path(out)
     seeds, configs = _check_seeds(seeds), _check_configs(release, configs)
     if not isinstance(name, str) or not name:
@@ -98,19 +149,38 @@ def write_submission(produce: Producer, release: Path, out: Path, *, seeds: Sequ
     written = skipped = 0
     seconds = 0.0
     total = len(seeds) * sum(len(ids) for c in configs for ids in _column(release, c, "episode_ids"))
+    pending: list[tuple[EpisodeContext, Path]] = []
+
+    def flush() -> None:
+        nonlocal written, seconds
+        if pending:
+            seconds += _write_batch(produce, pending)
+            written += len(pending)
+            _write_manifest(out, name, seeds, configs, before + seconds)
+            bar.update(len(pending))
+            pending.clear()
+
     with tqdm(total=total, desc=name, unit="video", disable=not progress, file=terminal()) as bar:
         for ctx in _episodes(release, configs, seeds[0]):
             for seed in seeds:
                 path = out / ctx.config / ctx.episode_id / VIDEO_NAME.format(seed=seed)
                 if path.exists():
                     skipped += 1
-                else:
-                    seconds += _write_one(produce, replace(ctx, seed=seed), path)
-                    written += 1
-                    _write_manifest(out, name, seeds, configs, before + seconds)
-                bar.update()
+                    bar.update()
+                    continue
+                if pending and pending[0][0].config != ctx.config:
+                    flush()  # a batch never mixes configs: one platform, one resolution, one action width
+                pending.append((replace(ctx, seed=seed), path))
+                if len(pending) >= batch_size:
+                    flush()
+        flush()
     _write_manifest(out, name, seeds, configs, before + seconds)
     return GenerateResult(written, skipped, seconds)
+
+
+def per_episode(produce: Producer) -> BatchProducer:
+    """A batch producer calling the per-episode `produce` once per context."""
+    return lambda ctxs: [produce(ctx) for ctx in ctxs]
 
 
 def check_frames(frames: object, num_frames: int, where: str) -> np.ndarray:
@@ -135,24 +205,26 @@ def check_frames(frames: object, num_frames: int, where: str) -> np.ndarray:
     return np.rint(arr).astype(np.uint8)
 
 
-def _write_one(produce: Producer, ctx: EpisodeContext, path: Path) -> float:
-    """Produce, check and atomically write one video; returns the seconds spent producing it."""
-    where = f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}"
+def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]]) -> float:
+    """Produce, check and atomically write a batch of videos; returns the seconds spent producing them."""
+    where = ", ".join(f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}" for ctx, _ in items[:3])
+    where += f" (+{len(items) - 3} more)" if len(items) > 3 else ""
     start = time.perf_counter()
     try:
-        frames = produce(ctx)
+        batch = produce([ctx for ctx, _ in items])
     except Exception as e:
         e.add_note(f"while generating {where}")
         raise
     seconds = time.perf_counter() - start
-    frames = check_frames(frames, ctx.num_frames, where)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")  # keeps .mp4: the muxer goes by the suffix
-    try:
-        write_video(tmp, frames, ctx.fps)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    for frames, (ctx, path) in zip(batch, items):
+        frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.partial{path.suffix}")  # keeps .mp4: the muxer goes by the suffix
+        try:
+            write_video(tmp, frames, ctx.fps)
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
     return seconds
 
 
