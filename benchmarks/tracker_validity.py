@@ -31,12 +31,12 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.reference import episodes, reference_frames
-from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, RELEASE_JSON
+from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON
 from wsp_eval.suites.reference import InstanceReference
 from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, motion_gate, object_path, project,
                                scoring_frames, t4_score)
 
-POSES = "observation.object_poses"
+POSES = OBJECT_POSES_KEY
 IN_VIEW_MARGIN = 12  # px: another object counts when its frame-0 position is this far inside the frame
 
 

@@ -18,7 +18,8 @@ from wsp_data.builders.t5_rules import check
 from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms import kit
 from wsp_data.platforms.libero.kit import osc_blocked
-from wsp_data.schema import CARD, PLATFORM_INFO, SOURCE_ROLE
+from wsp_data.schema import CARD, CONTACTS_KEY, OBJECT_POSES_KEY, PLATFORM_INFO, SOURCE_ROLE
+from wsp_eval.reference import object_poses
 
 VIDEO = PLATFORM_INFO["libero"].video_key  # observation.images.agentview
 QLIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
@@ -31,7 +32,7 @@ def episode(ds, index: int) -> dict:
     frames = [ds[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
     stack = lambda k: np.stack([f[k].numpy() for f in frames])  # noqa: E731
     return {"qpos": stack("observation.state"), "tcp": stack("observation.ee_pose"),
-            "objects": stack("observation.object_poses").reshape(len(frames), -1, 7),
+            "objects": object_poses(stack(OBJECT_POSES_KEY), len(ep["wsp.objects"])),
             "actions": stack("action")[:-1], "joint": stack("action.joint")[:-1],
             "success": stack("next.success").reshape(len(frames), -1)[:, 0], "meta": ep}
 
@@ -120,7 +121,7 @@ def test_t4_evaluated_object_never_moves_nor_is_touched(libero_release):
     for r in rows:
         ep = episode(ds, r["episode_indices"][0])
         k = r["evaluated_object_index"]
-        contacts = np.stack([ds[i]["observation.contacts"].numpy() for i in range(ep["meta"]["dataset_from_index"],
+        contacts = np.stack([ds[i][CONTACTS_KEY].numpy() > 0.5 for i in range(ep["meta"]["dataset_from_index"],
                                                                                   ep["meta"]["dataset_to_index"])])
         assert valid(ep) is None
         assert not contacts[:, k].any() and static(ep["objects"][:, k].astype(np.float64))
@@ -143,7 +144,7 @@ def test_t5_stored_states_pass_their_primitive_rule(libero_release):
     assert_source_episodes(ds, rows)
     for r in rows:
         ep = episode(ds, r["episode_indices"][0])
-        contacts = np.stack([ds[i]["observation.contacts"].numpy() for i in range(ep["meta"]["dataset_from_index"],
+        contacts = np.stack([ds[i][CONTACTS_KEY].numpy() > 0.5 for i in range(ep["meta"]["dataset_from_index"],
                                                                                   ep["meta"]["dataset_to_index"])])
         k = r["evaluated_index"]
         assert valid(ep) is None

@@ -16,7 +16,8 @@ from wsp_data.builders.t2 import (
     time_normalised,
 )
 from wsp_data.platforms import kit
-from wsp_data.schema import FPS, MASK_KEY, MAX_OBJECTS, SEED_BASE, VIDEO_KEY
+from wsp_data.schema import FPS, MAX_OBJECTS, OBJECT_POSES_KEY, SEED_BASE, VIDEO_KEY
+from wsp_eval.reference import object_poses, reference_masks
 
 
 
@@ -47,10 +48,10 @@ def episodes(release, rows):
             return np.stack([f[key].numpy() for f in frames])
         out.append({
             "rgb": (stack(VIDEO_KEY).transpose(0, 2, 3, 1) * 255).round().astype(np.uint8),
-            "labels": (stack(MASK_KEY)[:, 0] * 255).round().astype(np.uint8),
+            "labels": reference_masks(ds.root, idx),
             "actions": stack("action")[:-1],  # the last frame repeats the last action, never executed
             "qpos": stack("observation.state"), "tcp": stack("observation.ee_pose"),
-            "objects": stack("observation.object_poses").reshape(len(frames), MAX_OBJECTS, 7),
+            "objects": object_poses(stack(OBJECT_POSES_KEY), len(ep["wsp.objects"])),
         })
     return out
 

@@ -12,7 +12,8 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import assert_source_episodes, instance_rows, open_lerobot
 
-from wsp_data.schema import INSTANCES, MASK_KEY, VIDEO_KEY
+from wsp_data.schema import CONTACTS_KEY, INSTANCES, OBJECT_POSES_KEY, VIDEO_KEY
+from wsp_eval.reference import object_poses, reference_masks
 
 KINDS = ("distractor", "false_contact", "spatial_proximity")
 STILL_M, STILL_RAD = 0.005, 0.05  # an object that stays put
@@ -45,10 +46,10 @@ def episodes(ds, rows):
         ep = ds.meta.episodes[idx]
         table = ds.hf_dataset.select(range(ep["dataset_from_index"], ep["dataset_to_index"]))
         cols = {k: np.stack([np.asarray(v, np.float64) for v in table[k]]) for k in
-                ("observation.object_poses", "observation.contacts", "observation.state", "observation.ee_pose",
+                (OBJECT_POSES_KEY, CONTACTS_KEY, "observation.state", "observation.ee_pose",
                  "action", "next.success")}
-        out.append({"poses": cols["observation.object_poses"].reshape(len(table), -1, 7),
-                    "contacts": cols["observation.contacts"].astype(bool), "qpos": cols["observation.state"],
+        out.append({"poses": object_poses(cols[OBJECT_POSES_KEY], len(ep["wsp.objects"])),
+                    "contacts": cols[CONTACTS_KEY].astype(bool), "qpos": cols["observation.state"],
                     "tcp": cols["observation.ee_pose"], "action": cols["action"],
                     "success": cols["next.success"].astype(bool).reshape(-1), "episode": ep})
     return out
@@ -154,7 +155,7 @@ def test_stored_reference_scores_100_without_the_simulator(rows, ds):
         ep = ds.meta.episodes[r["episode_indices"][0]]
         frames = [ds[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
         video = np.stack([(f[VIDEO_KEY].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) for f in frames])
-        mask0 = (frames[0][MASK_KEY][0].numpy() * 255).round().astype(np.uint8)
+        mask0 = reference_masks(ds.root, r["episode_indices"][0])[0]
         assert set(np.unique(mask0)) <= {0, 1, 2} and (mask0 == 2).any()
         assert motion_gate(scoring_frames(video), mask0) == pytest.approx(r["gate_reference"], rel=0.1)
         assert t4_score(video, np.array(r["object_pixel_256"]), mask0, r["gate_reference"]).score == 100.0

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build side and tests import them from here)
     BUILD_REPORT, CARD, CODEBASE_VERSION, CONFIG_NAME, CROISSANT, DEFAULT_RELEASE_NAME, EPISODE_COLUMNS, EPISODE_ID,
-    FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, LOG_DIR, MASK_KEY, MAX_OBJECTS, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR,
-    SUITES,
+    CONTACTS_KEY, FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, LOG_DIR, MASK_COLUMN, MAX_OBJECTS, OBJECT_POSES_KEY,
+    RELEASE_JSON, ROBOT_MASKS, SOURCE_ROLE, STAGING_DIR, SUITES,
 )
 
 # ManiSkill's native streams (SPEC §2): the platform module imports these, never the reverse.
@@ -41,17 +41,16 @@ def frame_features(info: PlatformInfo) -> dict:
     """LeRobot feature spec of every rollout frame on the platform `info` describes. Frame t holds the
     observation at t and the action applied after it; the last frame's action repeats the previous one and is
     never executed. `action` is the platform's native stream; the other stream (`alt_action_key`) is stored
-    beside it."""
+    beside it. Policy inputs (`observation.*`: the camera, joint state, end-effector pose) hold no padding and
+    no NaN; simulator ground truth is under `sim.*` and the robot masks in ROBOT_MASKS, outside the features."""
     img = (IMAGE_SIZE, IMAGE_SIZE, 3)
     hwc = ["height", "width", "channels"]
     return {
         info.video_key: {"dtype": "video", "shape": img, "names": hwc},
-        # label image, the label in all three channels: 0 not robot, 1 arm, 2 wrist/hand/fingers
-        MASK_KEY: {"dtype": "image", "shape": img, "names": hwc},
         "observation.state": {"dtype": "float32", "shape": (9,), "names": [f"q{i}" for i in range(7)] + ["finger_l", "finger_r"]},
         "observation.ee_pose": {"dtype": "float32", "shape": (7,), "names": ["x", "y", "z", "qw", "qx", "qy", "qz"]},
-        "observation.object_poses": {"dtype": "float32", "shape": (MAX_OBJECTS * 7,), "names": None},
-        "observation.contacts": {"dtype": "bool", "shape": (MAX_OBJECTS,), "names": None},
+        OBJECT_POSES_KEY: {"dtype": "float32", "shape": (MAX_OBJECTS * 7,), "names": None},
+        CONTACTS_KEY: {"dtype": "float32", "shape": (MAX_OBJECTS,), "names": None},
         "action": {"dtype": "float32", "shape": (len(info.action_names),), "names": list(info.action_names)},
         info.alt_action_key: {"dtype": "float32", "shape": (len(info.alt_action_names),),
                               "names": list(info.alt_action_names)},

@@ -1,6 +1,7 @@
 """Assemble staged slots into one config of a release: a LeRobot v3.0 dataset written through lerobot's
-own API (near-lossless h264 yuv444p crf 0 video, PNG label masks), `wsp.*` episode columns in its
-episode table, and `instances.parquet` (one row per instance).
+own API (near-lossless h264 yuv444p crf 0 video), `wsp.*` episode columns in its episode table,
+`robot_masks.parquet` (PNG label masks, outside LeRobot's features) and `instances.parquet` (one row per
+instance).
 
 Writes are deterministic (same staged input → byte-identical files) and atomic per config: the dataset is
 written beside its final place and swapped in when complete.
@@ -21,7 +22,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from wsp_data.platforms import kit
-from wsp_data.schema import EPISODE_ID, INSTANCES, MASK_KEY, SOURCE_ROLE, PlatformInfo, frame_features
+from wsp_data.schema import (
+    CONTACTS_KEY, EPISODE_ID, INSTANCES, MASK_COLUMN, OBJECT_POSES_KEY, ROBOT_MASKS, SOURCE_ROLE, PlatformInfo,
+    frame_features,
+)
 from wsp_data.staging import RolloutArrays, SlotRecord
 
 REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
@@ -34,11 +38,10 @@ def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
         a = min(t, last)  # the final frame repeats the last action (never executed)
         yield {
             info.video_key: r.rgb[t],
-            MASK_KEY: np.repeat(r.mask[t][..., None], 3, axis=2),
             "observation.state": r.qpos[t],
             "observation.ee_pose": r.tcp_pose[t],
-            "observation.object_poses": r.object_poses[t].reshape(-1),
-            "observation.contacts": r.contacts[t],
+            OBJECT_POSES_KEY: np.nan_to_num(r.object_poses[t], nan=0.0).reshape(-1),  # unused slots: zeros
+            CONTACTS_KEY: r.contacts[t].astype(np.float32),
             "action": r.actions[a],
             info.alt_action_key: r.alt_actions[a],
             "next.success": np.array([r.success[t]]),
@@ -62,6 +65,7 @@ def write_config(config_dir: Path, config: str, platform: str,
     )
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
+    masks = _MaskWriter(tmp / ROBOT_MASKS)
     for record, rollouts in instances:
         row = dict(record.row)
         indices = []
@@ -71,6 +75,7 @@ def write_config(config_dir: Path, config: str, platform: str,
                 for frame in _frames(r, row["instruction"], info):
                     ds.add_frame(frame)
                 ds.save_episode(parallel_encoding=False)
+            masks.add(index, r.mask)
             indices.append(index)
             episode_rows.append({
                 "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
@@ -95,6 +100,7 @@ def write_config(config_dir: Path, config: str, platform: str,
             row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
         instance_rows.append(row)
     ds.finalize()
+    masks.close()
     _set_split(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
     _drop_fingerprints(tmp)
     _append_episode_columns(tmp, episode_rows)
@@ -103,6 +109,35 @@ def write_config(config_dir: Path, config: str, platform: str,
     shutil.rmtree(config_dir, ignore_errors=True)
     tmp.rename(config_dir)
     return len(episode_rows)
+
+
+class _MaskWriter:
+    """`robot_masks.parquet`, one row per frame in LeRobot's global frame order, written an episode at a time."""
+
+    SCHEMA = pa.schema([("index", pa.int64()), ("episode_index", pa.int64()), ("frame_index", pa.int64()),
+                        (MASK_COLUMN, pa.binary())])
+
+    def __init__(self, path: Path):
+        self.writer = pq.ParquetWriter(path, self.SCHEMA)
+        self.next_index = 0
+
+    def add(self, episode_index: int, masks: np.ndarray) -> None:
+        from PIL import Image
+
+        n = len(masks)
+        pngs = []
+        for m in masks:
+            buf = io.BytesIO()
+            Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
+            pngs.append(buf.getvalue())
+        self.writer.write_table(pa.table({
+            "index": np.arange(self.next_index, self.next_index + n, dtype=np.int64),
+            "episode_index": np.full(n, episode_index, dtype=np.int64), "frame_index": np.arange(n, dtype=np.int64),
+            MASK_COLUMN: pa.array(pngs, pa.binary())}, schema=self.SCHEMA))  # one row group per episode
+        self.next_index += n
+
+    def close(self) -> None:
+        self.writer.close()
 
 
 def _append_episode_columns(root: Path, rows: list[dict]) -> None:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_eval.release_format import MASK_KEY
+from wsp_eval.release_format import MASK_COLUMN, ROBOT_MASKS
 from wsp_eval.video import VideoError
 
 
@@ -70,11 +70,21 @@ def reference_masks(config_dir: Path, episode_index: int) -> np.ndarray:
     """The robot label masks of one episode (length, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers."""
     from PIL import Image
 
-    ep = episodes(Path(config_dir))[episode_index]
-    lo, hi = ep["dataset_from_index"], ep["dataset_to_index"]
-    masks = []
-    for path in sorted(glob.glob(str(Path(config_dir) / "data" / "*" / "*.parquet"))):
-        t = pq.read_table(path, columns=["index", MASK_KEY], filters=[("index", ">=", lo), ("index", "<", hi)])
-        for cell in t.sort_by("index").column(MASK_KEY).to_pylist():
-            masks.append(np.asarray(Image.open(io.BytesIO(cell["bytes"])))[..., 0])
-    return np.stack(masks)
+    path = Path(config_dir) / ROBOT_MASKS
+    if not path.exists():
+        raise VideoError(f"{path}: missing; releases before format 0.2.0 kept the masks elsewhere: rebuild the "
+                         "release with this version of worldsimprobe")
+    t = pq.read_table(path, columns=["frame_index", MASK_COLUMN], filters=[("episode_index", "==", episode_index)])
+    cells = t.sort_by("frame_index").column(MASK_COLUMN).to_pylist()
+    n = episodes(Path(config_dir))[episode_index]["length"]
+    if len(cells) != n:
+        raise VideoError(f"{path}: episode {episode_index} has {len(cells)} masks, expected {n}")
+    return np.stack([np.asarray(Image.open(io.BytesIO(c))) for c in cells])
+
+
+def object_poses(stored: np.ndarray, objects: int) -> np.ndarray:
+    """Stored `sim.object_poses` rows (T, MAX_OBJECTS·7) → (T, MAX_OBJECTS, 7) float64 with the unused slots
+    (from `objects` on: the length of the episode's `wsp.objects`) NaN, the builders' in-memory convention."""
+    poses = np.asarray(stored, dtype=np.float64).reshape(len(stored), -1, 7).copy()
+    poses[:, objects:] = np.nan
+    return poses

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-BENCHMARK_VERSION = "0.1.0"
+BENCHMARK_VERSION = "0.2.0"  # 0.2.0: robot masks beside the LeRobot data, simulator state under sim.*
 CODEBASE_VERSION = "v3.0"  # LeRobot dataset format
 DEFAULT_RELEASE_NAME = "worldsimprobe"
 
@@ -20,6 +20,11 @@ RELEASE_JSON = "release.json"
 CARD = "README.md"
 CROISSANT = "croissant.json"
 INSTANCES = "instances.parquet"
+# Per config: the exact robot label image of every frame (columns index, episode_index, frame_index and
+# robot_mask, a single-channel PNG: 0 not robot, 1 arm, 2 wrist/hand/fingers). Kept out of LeRobot's features
+# so that no policy is ever fed the ground-truth mask as a camera.
+ROBOT_MASKS = "robot_masks.parquet"
+MASK_COLUMN = "robot_mask"
 BUILD_REPORT = "build_report.json"  # per config, beside instances.parquet
 INPUTS_DIR = "inputs"  # per config of an inputs-only release (`wsp export-inputs`): what a model needs, no more
 FIRST_FRAME = "inputs/first_frames/{episode_id}.png"  # frame 0 of each scored episode, lossless
@@ -37,8 +42,12 @@ SUITES = (*SCORED_SUITES, "train")
 # -- frames and episodes --------------------------------------------------------------------------------
 FPS = 20
 IMAGE_SIZE = 128
-MAX_OBJECTS = 4  # object pose / contact columns per frame (unused slots are NaN / False)
-MASK_KEY = "observation.robot_mask"
+MAX_OBJECTS = 4  # object pose / contact slots per frame; the episode's `wsp.objects` lists the used ones
+# Simulator ground truth per frame, outside LeRobot's `observation.*` namespace (never a policy input): world
+# poses of the objects in `wsp.objects` (xyz + quaternion wxyz; an unused slot is all zeros, which no real pose
+# is: its quaternion has norm 0) and robot–object contact flags (1.0 / 0.0; 0 in unused slots).
+OBJECT_POSES_KEY = "sim.object_poses"
+CONTACTS_KEY = "sim.contacts"
 
 # Episode-level columns appended to LeRobot's meta/episodes table (readable as ds.meta.episodes[i][...]).
 SOURCE_ROLE = "source"  # an instance's unscored, unperturbed source rollout (action-blind baseline, paired training data)

@@ -1,7 +1,7 @@
 """T5 acceptance rules (SPEC §3 T5): did the scripted primitive happen? Pure numpy on stored states.
 
 Every rule reads only the evaluated object's pose sequence (T, 7: xyz + quaternion wxyz, as stored in
-`observation.object_poses`), its robot–object contact flags (T,) (`observation.contacts`) and the robot base's
+`sim.object_poses`), its robot–object contact flags (T,) (`sim.contacts`) and the robot base's
 world xy (instance column `robot_base_xy`), so builders, tests and evaluators re-check a reference from the
 release alone. `measure` computes the quantities, `passes` applies one primitive's rule to them.
 
