@@ -135,7 +135,16 @@ def _worker_decide(slot: int) -> SlotRecord:
     return decide_slot(_WORKER["builder"], _WORKER["staging"], slot)
 
 
-def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int) -> Iterator[SlotRecord]:
+EXECUTORS = ("local", "ray")  # local: this process, or a process pool with --workers > 1; ray: see ray_executor
+
+
+def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, executor: str = "local",
+               address: str | None = None) -> Iterator[SlotRecord]:
+    if executor == "ray":
+        from wsp_data.ray_executor import run_slots
+
+        yield from run_slots(config, staging, slots, workers, address)
+        return
     if workers <= 1 or len(slots) <= 1:
         builder = builder_class(config.suite)(config)
         try:
@@ -233,8 +242,13 @@ def assemble(config: BuildConfig, out: Path, staging: Staging) -> dict:
 
 
 def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), workers: int = 1,
-          restart: bool = False, progress: bool = True) -> BuildResult:
+          restart: bool = False, progress: bool = True, executor: str = "local",
+          address: str | None = None) -> BuildResult:
     index, total = shard
+    if executor not in EXECUTORS:
+        raise BuildError(f"executor {executor!r}: expected one of {', '.join(EXECUTORS)}")
+    if address and executor != "ray":
+        raise BuildError("--address names a Ray cluster: use it with --executor ray")
     if not (total >= 1 and 0 <= index < total):
         raise BuildError(f"--shard {index}/{total}: expected i/n with 0 <= i < n")
     out = prepare_output(out)
@@ -247,14 +261,15 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
         staging = _open_staging(out, config, restart)
         t0 = time.perf_counter()
         todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
-        decided = kept = steps = 0
-        bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="inst", disable=not progress, file=terminal())
-        for record in _run_slots(config, staging, todo, workers):
+        decided = kept = steps = proposed = 0
+        bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="slot", disable=not progress, file=terminal())
+        for record in _run_slots(config, staging, todo, workers, executor, address):
             decided += 1
             kept += record.kept
+            proposed += len(record.attempts)
             steps += sum(a["rendered_steps"] for a in record.attempts)
             bar.update(1)
-            bar.set_postfix(kept=kept, dropped=decided - kept)
+            bar.set_postfix(kept=kept, dropped=decided - kept, accept=f"{kept / max(1, proposed):.0%}")
         bar.close()
         remaining = sum(not staging.is_decided(k) for k in range(config.count))
         report = assemble(config, out, staging) if remaining == 0 else None

@@ -81,6 +81,10 @@ def parser() -> argparse.ArgumentParser:
     b.add_argument("--max-attempts", type=_positive, default=8, help="proposals per instance slot before giving up")
     b.add_argument("--shard", type=_shard, default=(0, 1), help="build only slots k with k %% n == i (i/n)")
     b.add_argument("--workers", type=_positive, default=1, help="worker processes (each holds its own simulators)")
+    b.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="local (this machine's processes, default) or ray (slots as Ray tasks on a cluster)")
+    b.add_argument("--address", help="with --executor ray: the cluster to join (`auto`, or host:port); default: "
+                                     "a local Ray instance with --workers CPUs")
     b.add_argument("--restart", action="store_true", help="discard a staged unfinished build of this config")
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     i = sub.add_parser("info", help="summarise a release folder")
@@ -205,7 +209,7 @@ def cmd_build(args) -> int:
         count = args.count or PAPER_COUNTS.get(args.platform, {}).get(args.suite) or EPISODES_PER_TASK * len(tasks)
         config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
-                       progress=not args.quiet)
+                       progress=not args.quiet, executor=args.executor, address=args.address)
     except (BuildError, ValueError) as e:
         raise CliError(str(e)) from None
     if result.up_to_date:
@@ -449,6 +453,10 @@ def main(argv: list[str] | None = None) -> int:
         _print_failure_hint()
         return 2
     except ModuleNotFoundError as e:
+        if (e.name or "").split(".")[0] == "ray":
+            print(f"wsp: error: `--executor ray` needs the cluster extra (missing module 'ray'): "
+                  "pip install 'worldsimprobe[cluster]' — `make setup` installs it", file=sys.stderr)
+            return 2
         if (e.name or "").split(".")[0] not in BUILD_MODULES:
             raise
         print(f"wsp: error: `wsp {args.command}` needs the build extra (missing module {e.name!r}): "
