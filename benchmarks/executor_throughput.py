@@ -25,7 +25,7 @@ def timed_build(config: BuildConfig, out: Path, executor: str, workers: int) -> 
     seconds = time.perf_counter() - start
     assert result.assembled, f"{executor}×{workers}: not assembled"
     files = json.loads((out / RELEASE_JSON).read_text())["files"]
-    return seconds, {k: v for k, v in files.items() if k != "README.md"}  # the card stamps nothing per run
+    return seconds, files
 
 
 def main() -> None:
@@ -42,7 +42,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="wsp-executors-") as tmp:
         for run in args.runs:
             executor, workers = run.split(":")
-            seconds, files = timed_build(config, Path(tmp) / run.replace(":", "_"), executor, int(workers))
+            out = Path(tmp) / run.replace(":", "_") / "worldsimprobe"  # same folder name: the card and Croissant name it
+            seconds, files = timed_build(config, out, executor, int(workers))
             reference = reference or files
             rows.append((executor, int(workers), seconds, files == reference))
             print(f"{executor}×{workers}: {seconds:.1f} s", flush=True)
