@@ -157,3 +157,22 @@ def test_overall_and_macro_average():
     assert out["platforms"]["maniskill"]["overall"]["score"] == 60.0  # unweighted mean of T1 and T2
     assert out["macro_average"]["score"] == 35.0  # mean over platforms: (60 + 10) / 2
     assert BOOTSTRAP >= 1000
+
+
+def test_reference_flow_cache_is_reused_exactly(suites_scores, suites_release, tmp_path):
+    """RMFA's reference side is computed once per release and flow backend (`wsp_eval.flow_cache`): a later
+    scoring reads the entries without rewriting them, a damaged entry is recomputed, and the scores equal, bit
+    for bit, a scoring that recomputes every reference flow."""
+    sub, _ = suites_scores["static"]
+    entries = sorted(suites_release.glob(".cache/reference_flows/*/t[23]_maniskill/*.npz"))
+    assert {p.parent.name for p in entries} == {"t2_maniskill", "t3_maniskill"}  # written by the fixture's scoring
+    stamps = {p: p.stat().st_mtime_ns for p in entries}
+    entries[0].write_bytes(b"not a zip")  # a damaged entry
+    cached = score_submission(sub, suites_release, tmp_path / "cached", progress=False)
+    np.load(entries[0]).close()  # rewritten, readable
+    assert all(p.stat().st_mtime_ns == stamps[p] for p in entries[1:])  # read, not recomputed
+    fresh = score_submission(sub, suites_release, tmp_path / "fresh", progress=False, flow_cache=False)
+
+    def scores(report):
+        return [(r["instance_id"], r["score"], [s.get("windows") for s in r["seeds"]]) for r in report["instances"]]
+    assert scores(cached) == scores(fresh)

@@ -175,6 +175,8 @@ def _score_options(p: argparse.ArgumentParser) -> None:
                    help="score lossy or chroma-subsampled videos instead of refusing them (the report says so; "
                         "such scores are not comparable: codec noise lowers T1 most)")
     p.add_argument("--flow", choices=FLOW, default="dis")
+    p.add_argument("--no-flow-cache", action="store_true",
+                   help="recompute the reference flows instead of reusing the release's reference-flow cache")
     p.add_argument("--flow-checkpoint", help="local checkpoint for --flow dpflow")
     p.add_argument("--tracker", choices=TRACKER, default="lk")
     p.add_argument("--tracker-checkpoint", help="local checkpoint for --tracker tapnext")
@@ -310,7 +312,7 @@ def _score(submission: Path, release: Path, out: Path, args) -> dict:
     try:
         return score_submission(submission, release, out, spec=_spec(args), workers=args.workers,
                                 allow_missing=args.allow_missing, accept_lossy=args.accept_lossy,
-                                progress=not args.quiet)
+                                progress=not args.quiet, flow_cache=not args.no_flow_cache)
     except (ScoreError, BackendUnavailable) as e:
         raise CliError(str(e)) from None
 

@@ -18,6 +18,8 @@
   submission, release and backends skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
   single-threaded).
+- Reference flows (T2, T3) are computed once per release and flow backend and reused by later scorings of any
+  submission (`wsp_eval.flow_cache`); `flow_cache=False` recomputes them.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ import pyarrow.parquet as pq
 from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
+from wsp_eval.flow_cache import cache_dir
 from wsp_eval.release_format import INSTANCES, RELEASE_JSON, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
@@ -63,6 +66,7 @@ class Job:
     row: dict
     seeds: tuple[int, ...]
     accept_lossy: bool = False
+    flow_cache: str | None = None  # the release's reference-flow cache folder (`wsp_eval.flow_cache`), if used
 
 
 def split_config(config: str) -> tuple[str, str]:
@@ -108,7 +112,8 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
     suite, platform = split_config(job.config)
     module = SCORERS[suite]
     backends = _backends(spec, module.NEEDS)
-    ref = InstanceReference(Path(job.release) / job.config, job.row)
+    ref = InstanceReference(Path(job.release) / job.config, job.row,
+                            flow_cache=Path(job.flow_cache) if job.flow_cache else None)
     prepared = module.prepare(ref, backends)
     seeds, problems = [], []
     for seed in job.seeds:
@@ -203,8 +208,9 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
 
 def score_submission(submission: Path, release: Path, out: Path, *, spec: BackendSpec = BackendSpec(),
                      workers: int = 1, allow_missing: bool = False, accept_lossy: bool = False,
-                     progress: bool = True) -> dict:
-    """Score `submission` against `release`; write the reports under `out`; return the report dict."""
+                     progress: bool = True, flow_cache: bool = True) -> dict:
+    """Score `submission` against `release`; write the reports under `out`; return the report dict. With
+    `flow_cache`, RMFA's reference flows come from (and go to) the release's reference-flow cache."""
     from tqdm import tqdm
 
     from wsp_eval.report import write_reports
@@ -218,7 +224,10 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     out.mkdir(parents=True, exist_ok=True)
     done = _open_cache(out, _cache_key(submission, release, spec, configs, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
-    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy)
+    flows = None
+    if flow_cache and backends.flow is not None:
+        flows = str(cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}"))
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows)
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
     bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress,

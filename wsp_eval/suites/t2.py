@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.flow import clip_duration, mean_window_score, reference_flows, rmfa_windows, video_flows
+from wsp_eval.flow import clip_duration, mean_window_score, rmfa_windows, video_flows
 
 SUITE, TITLE = "t2", "Global trajectory coverage"
 ROLES = ("reference",)
@@ -16,18 +16,18 @@ DECILES = 10
 
 
 class _Reference:
-    """Reference flows per common duration (the full clip unless a generated video is shorter)."""
+    """Reference flows per common duration (the full clip unless a generated video is shorter); the reference
+    video and masks are decoded only when the flow cache does not hold them."""
 
     def __init__(self, ref, role: str, backend):
-        self.frames, self.masks, self.fps = ref.frames(role), ref.masks(role), ref.fps
-        self.duration = clip_duration(len(self.frames), self.fps)
-        self.backend = backend
+        self.ref, self.role, self.backend = ref, role, backend
+        self.duration = clip_duration(ref.num_frames(role), ref.fps)
         self._flows: dict[float, object] = {}
 
     def flows(self, duration: float):
         key = round(min(duration, self.duration), 9)
         if key not in self._flows:
-            self._flows[key] = reference_flows(self.frames, self.masks, self.fps, key, self.backend)
+            self._flows[key] = self.ref.reference_flows(self.role, key, self.backend)
         return self._flows[key]
 
 
