@@ -63,7 +63,7 @@ def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference"
     out = []
     for k in range(all_poses.shape[1]) if role == "reference" else (evaluated,):
         poses = all_poses[:, k]
-        if not np.isfinite(poses).all():  # no such object in this rollout (a distractor added to the reference)
+        if not np.linalg.norm(poses[0, 3:]) > 0:  # an unused slot (all zeros): no such object in this rollout
             continue
         try:
             truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE)

@@ -9,7 +9,7 @@ class ToyNet:  # stands in for your network: here, it holds the first frame stil
 
 
 class Adapter:
-    batch_size = 8  # `wsp generate` sends up to 8 requests of one config per call
+    wsp_batch_size = 8  # `wsp generate` sends up to 8 requests of one config per call
 
     def __init__(self):
         self.net = ToyNet()  # load your checkpoint here (from disk: nothing downloads at run time)

@@ -13,7 +13,7 @@ from wsp_data.schema import LOG_DIR, RELEASE_JSON
 # A long command in miniature: a bar on the terminal, C-level and Python output from this process and from a
 # spawned worker process (as a build's simulator workers write it), then a failure.
 SCRIPT = textwrap.dedent("""
-    import multiprocessing as mp, os, sys
+    import ctypes, multiprocessing as mp, os, sys
     from pathlib import Path
     from tqdm import tqdm
     from wsp_eval import console
@@ -31,6 +31,7 @@ SCRIPT = textwrap.dedent("""
                     for _ in tqdm(pool.imap(worker, range(3)), total=3, desc="stage", file=console.terminal()):
                         pass
                 os.write(1, b"parent C-level stdout\\n")
+                ctypes.CDLL(None).printf(b"parent libc printf, buffered\\n")  # C stdio's own buffer
                 print("mani_skill - WARNING - parent python stderr", file=sys.stderr)
                 raise RuntimeError("simulated failure")
         except RuntimeError:
@@ -47,7 +48,7 @@ def test_library_output_goes_to_the_log_and_bars_to_the_terminal(tmp_path):
     assert r.returncode == 0, r.stderr
     text = log.read_text()
     for line in ("worker C-level stderr 0", "worker C-level stderr 2", "worker python stdout 1",
-                 "parent C-level stdout", "parent python stderr"):
+                 "parent C-level stdout", "parent libc printf, buffered", "parent python stderr"):
         assert line in text, text
     # The terminal got the bar, the failure hint (the log's path and its last lines), and the summary printed
     # after the command — and none of the library lines except inside the hint.

@@ -118,7 +118,7 @@ def test_load_model(tmp_path, monkeypatch):
 
 class BatchedShift:
     """The shift model behind the batched call, recording each batch it is sent."""
-    batch_size = 3
+    wsp_batch_size = 3
 
     def __init__(self, fail_after: int | None = None):
         self.batches: list[list] = []
@@ -158,8 +158,8 @@ def test_killed_batched_run_resumes_and_bad_batches_are_named(t1_release, tmp_pa
     with pytest.raises(GenerateError, match=r"asked for 3 video\(s\), returned 2 item\(s\)"):
         generate(ShortBatch(), t1_release, tmp_path / "short", seeds=(0,), name="m", progress=False)
     bad = BatchedShift()
-    bad.batch_size = 0
-    with pytest.raises(GenerateError, match="batch_size 0: expected an integer from 1 to"):
+    bad.wsp_batch_size = 0
+    with pytest.raises(GenerateError, match="wsp_batch_size 0: expected an integer from 1 to"):
         generate(bad, t1_release, tmp_path / "bad", seeds=(0,), name="m", progress=False)
 
 
@@ -170,7 +170,7 @@ def test_the_readme_example_adapter_runs(t1_release, tmp_path, monkeypatch):
     root = Path(__file__).resolve().parents[1]
     monkeypatch.chdir(root)
     model = load_model("docs.example_adapter:model")
-    assert model.batch_size == 8
+    assert model.wsp_batch_size == 8
     generate(model, t1_release, tmp_path, seeds=(0,), name="example", progress=False)
     assert validate(tmp_path, t1_release) == []
     assert (root / "docs" / "example_adapter.py").read_text().strip() in (root / "README.md").read_text()

@@ -32,7 +32,7 @@ def episode(ds, index: int) -> dict:
     frames = [ds[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
     stack = lambda k: np.stack([f[k].numpy() for f in frames])  # noqa: E731
     return {"qpos": stack("observation.state"), "tcp": stack("observation.ee_pose"),
-            "objects": object_poses(stack(OBJECT_POSES_KEY), len(ep["wsp.objects"])),
+            "objects": object_poses(stack(OBJECT_POSES_KEY)),
             "actions": stack("action")[:-1], "joint": stack("action.joint")[:-1],
             "success": stack("next.success").reshape(len(frames), -1)[:, 0], "meta": ep}
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -163,8 +164,9 @@ def test_reference_flow_cache_is_reused_exactly(suites_scores, suites_release, t
     """RMFA's reference side is computed once per release and flow backend (`wsp_eval.flow_cache`): a later
     scoring reads the entries without rewriting them, a damaged entry is recomputed, and the scores equal, bit
     for bit, a scoring that recomputes every reference flow."""
-    sub, _ = suites_scores["static"]
-    entries = sorted(suites_release.glob(".cache/reference_flows/*/t[23]_maniskill/*.npz"))
+    sub, report = suites_scores["static"]
+    folder = Path(report["reference_flow_cache"])  # this scoring's own cache folder (release × flow backend)
+    entries = sorted(folder.glob("t[23]_maniskill/*.npz"))
     assert {p.parent.name for p in entries} == {"t2_maniskill", "t3_maniskill"}  # written by the fixture's scoring
     stamps = {p: p.stat().st_mtime_ns for p in entries}
     entries[0].write_bytes(b"not a zip")  # a damaged entry

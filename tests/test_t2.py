@@ -51,7 +51,7 @@ def episodes(release, rows):
             "labels": reference_masks(ds.root, idx),
             "actions": stack("action")[:-1],  # the last frame repeats the last action, never executed
             "qpos": stack("observation.state"), "tcp": stack("observation.ee_pose"),
-            "objects": object_poses(stack(OBJECT_POSES_KEY), len(ep["wsp.objects"])),
+            "objects": object_poses(stack(OBJECT_POSES_KEY)),
         })
     return out
 

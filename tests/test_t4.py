@@ -48,7 +48,7 @@ def episodes(ds, rows):
         cols = {k: np.stack([np.asarray(v, np.float64) for v in table[k]]) for k in
                 (OBJECT_POSES_KEY, CONTACTS_KEY, "observation.state", "observation.ee_pose",
                  "action", "next.success")}
-        out.append({"poses": object_poses(cols[OBJECT_POSES_KEY], len(ep["wsp.objects"])),
+        out.append({"poses": object_poses(cols[OBJECT_POSES_KEY]),
                     "contacts": cols[CONTACTS_KEY].astype(bool), "qpos": cols["observation.state"],
                     "tcp": cols["observation.ee_pose"], "action": cols["action"],
                     "success": cols["next.success"].astype(bool).reshape(-1), "episode": ep})

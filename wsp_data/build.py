@@ -27,6 +27,7 @@ from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, ST
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
 from wsp_data.writer import write_config
 from wsp_eval.console import library_output_to, terminal
+from wsp_eval.release_format import BENCHMARK_VERSION
 
 
 class BuildError(RuntimeError):
@@ -65,9 +66,12 @@ def prepare_output(out: Path) -> Path:
         raise BuildError(f"{out}: cannot write here ({e.strerror or e})") from e
     if (out / RELEASE_JSON).exists():
         try:
-            load_release(out)
+            version = load_release(out).get("version")
         except ReleaseError as e:
             raise BuildError(str(e)) from e
+        if version != BENCHMARK_VERSION:
+            raise BuildError(f"{out}: a release of format {version!r}; this version of worldsimprobe writes "
+                             f"{BENCHMARK_VERSION!r} and cannot add to it: build into a new folder")
     return out
 
 
@@ -256,7 +260,8 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
         existing = load_release(out)["configs"].get(config.name)
         if existing and existing["build_config"] == config.to_json() and (out / config.name).exists():
             return BuildResult(config, out, 0, 0, 0, False, 0.0, 0, up_to_date=True)
-    log = out / LOG_DIR / f"build_{config.name}.log"
+    shard_tag = "" if total == 1 else f"_shard{index}of{total}"  # concurrent shards: one log each
+    log = out / LOG_DIR / f"build_{config.name}{shard_tag}.log"
     with library_output_to(log):
         staging = _open_staging(out, config, restart)
         t0 = time.perf_counter()

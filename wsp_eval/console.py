@@ -8,6 +8,7 @@ terminal. When the command fails, `failure_hint()` gives the log's path and last
 
 from __future__ import annotations
 
+import ctypes
 import os
 import sys
 import time
@@ -21,6 +22,7 @@ HEADER = "=== wsp run"  # starts each run's part of a log
 LOG_NAME = "wsp.log"  # under a scoring or calibration output folder
 
 _terminal: TextIO | None = None
+_active_log: Path | None = None
 _failed_log: Path | None = None
 
 
@@ -29,39 +31,51 @@ def terminal() -> TextIO:
     return _terminal or sys.stderr
 
 
+def _flush_all() -> None:
+    """Flush Python's streams and C stdio's buffers, so nothing written before a switch lands after it."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass
+
+
 @contextmanager
 def library_output_to(log: Path) -> Iterator[Path]:
-    """Send file descriptors 1 and 2 (this process and workers started inside) to `log`, appending."""
-    global _terminal, _failed_log
+    """Send file descriptors 1 and 2 (this process and workers started inside) to `log`, appending; yields the
+    log that collects the output (the outer one when nested inside another long command)."""
+    global _terminal, _active_log, _failed_log
     if _terminal is not None:  # nested inside another long command: its log already collects everything
-        yield log
+        yield _active_log
         return
     log = Path(log)
     log.parent.mkdir(parents=True, exist_ok=True)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = {fd: os.dup(fd) for fd in (1, 2)}
-    with open(log, "ab") as f:
-        f.write(f"\n{HEADER} {time.strftime('%Y-%m-%d %H:%M:%S')}: {' '.join(sys.argv[1:])}\n".encode())
-        f.flush()
-        for fd in saved:
-            os.dup2(f.fileno(), fd)
-    _terminal = os.fdopen(os.dup(saved[2]), "w", buffering=1)
     _failed_log = None
+    _flush_all()
+    saved: dict[int, int] = {}
     try:
+        with open(log, "ab") as f:
+            f.write(f"\n{HEADER} {time.strftime('%Y-%m-%d %H:%M:%S')}: {' '.join(sys.argv[1:])}\n".encode())
+            f.flush()
+            for fd in (1, 2):
+                saved[fd] = os.dup(fd)
+                os.dup2(f.fileno(), fd)
+        _terminal = os.fdopen(os.dup(saved[2]), "w", buffering=1)
+        _active_log = log
         yield log
     except BaseException as e:
-        if not isinstance(e, KeyboardInterrupt):
+        if not isinstance(e, KeyboardInterrupt) and _active_log is not None:
             _failed_log = log
         raise
     finally:
-        sys.stdout.flush()
-        sys.stderr.flush()
+        _flush_all()
         for fd, keep in saved.items():
             os.dup2(keep, fd)
             os.close(keep)
-        _terminal.close()
-        _terminal = None
+        if _terminal is not None:
+            _terminal.close()
+        _terminal = _active_log = None
 
 
 def tail(log: Path, lines: int = TAIL_LINES) -> list[str]:
@@ -81,10 +95,12 @@ def tail(log: Path, lines: int = TAIL_LINES) -> list[str]:
 
 def failure_hint() -> str:
     """The path and last lines of the log of the command that just failed, or '' when there is none."""
-    if _failed_log is None:
+    global _failed_log
+    log, _failed_log = _failed_log, None  # said once
+    if log is None:
         return ""
-    rows = tail(_failed_log)
+    rows = tail(log)
     if not rows:
         return ""
     body = "\n".join(f"  | {r[:300]}" for r in rows)
-    return f"library output log: {_failed_log}; its last {len(rows)} line(s):\n{body}"
+    return f"library output log: {log}; its last {len(rows)} line(s):\n{body}"

@@ -1,12 +1,14 @@
 """Reference-flow cache: the reference side of RMFA (T2, T3), computed once per release and flow backend and
 reused by every later scoring of any submission (it was ≈ 40 % of T2's scoring time).
 
-Key: the SHA-256 of the release's `release.json` (which lists every file's checksum) with the flow backend's
-name and version, so a rebuilt release or another evaluator never reads stale flows. Location: `<release>/.cache/
+Key: the SHA-256 of the release's `release.json` (which lists every file's checksum), the flow backend's name
+and version, and the source of `wsp_eval/flow.py` with this module's format number, so a rebuilt release,
+another evaluator or changed RMFA code never reads stale flows. Location: `<release>/.cache/
 reference_flows/<key>/` when the release folder is writable (`release.json` ignores `.cache`), otherwise
 `$XDG_CACHE_HOME/worldsimprobe/reference_flows/<key>/` (default `~/.cache`). One file per (config, episode,
-common duration), written atomically: float32 flows and bool masks, bit for bit what a fresh computation gives.
-An unreadable entry is recomputed and rewritten.
+common duration), named by the number of 5 Hz samples the duration holds (what the flows depend on), written
+atomically: float32 flows and bool masks, bit for bit what a fresh computation gives. An unreadable entry, or
+one of another length, is recomputed and rewritten; no writable place only costs the cache.
 """
 
 from __future__ import annotations
@@ -20,21 +22,29 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_eval.flow import ReferenceFlows
+from wsp_eval import flow
+from wsp_eval.flow import ReferenceFlows, sample_times
 from wsp_eval.release_format import RELEASE_JSON
 
+FORMAT = 1  # bump when an entry's layout changes
 SUBDIR = Path(".cache") / "reference_flows"
-ENTRY = "{episode:06d}_{ms}ms.npz"
+ENTRY = "{episode:06d}_{samples}samples.npz"
 
 
-def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path:
-    """This release's and backend's cache folder (created), in the release when writable, else the user's cache."""
+def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path | None:
+    """This release's and backend's cache folder (created), in the release when writable, else the user's cache;
+    None when neither can be written (scoring then recomputes the flows)."""
     release = Path(release)
     h = hashlib.sha256((release / RELEASE_JSON).read_bytes())
-    h.update(f"\0{backend_name}\0{backend_version}".encode())
+    h.update(f"\0{backend_name}\0{backend_version}\0{FORMAT}\0".encode())
+    h.update(Path(flow.__file__).read_bytes())
     key = h.hexdigest()[:24]
-    for base in (release / SUBDIR,
-                 Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "worldsimprobe" / "reference_flows"):
+    bases = [release / SUBDIR]
+    user = os.environ.get("XDG_CACHE_HOME") or os.environ.get("HOME")
+    if user:
+        bases.append(Path(user) / ("" if os.environ.get("XDG_CACHE_HOME") else ".cache") / "worldsimprobe" /
+                     "reference_flows")
+    for base in bases:
         folder = base / key
         try:
             folder.mkdir(parents=True, exist_ok=True)
@@ -43,24 +53,30 @@ def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path:
             return folder
         except OSError:
             continue
-    raise OSError(f"no writable place for the reference-flow cache (tried {release / SUBDIR} and the user cache)")
+    return None
 
 
 def load_or_compute(folder: Path, config: str, episode: int, duration: float,
                     compute: Callable[[], ReferenceFlows]) -> ReferenceFlows:
     """The cached reference flows of (config, episode, duration), or `compute()` stored for the next scoring."""
-    path = Path(folder) / config / ENTRY.format(episode=episode, ms=int(round(duration * 1000)))
+    samples = len(sample_times(duration))
+    path = Path(folder) / config / ENTRY.format(episode=episode, samples=samples)
     try:
         with np.load(path) as z:
-            return ReferenceFlows(z["flows"], z["masks"])
+            cached = ReferenceFlows(z["flows"], z["masks"])
+        if len(cached.flows) == len(cached.masks) == samples - 1:
+            return cached
     except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError):
         pass  # absent or damaged: compute it
     flows = compute()
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial.npz")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".partial.npz")
     try:
-        np.savez(tmp, flows=flows.flows, masks=flows.masks)
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, flows=flows.flows, masks=flows.masks)
         os.replace(tmp, path)
     except OSError:
-        tmp.unlink(missing_ok=True)  # a full disk costs the cache, never the score
+        pass  # a full disk costs the cache, never the score
+    finally:
+        Path(tmp).unlink(missing_ok=True)
     return flows

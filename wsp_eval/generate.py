@@ -6,8 +6,8 @@ A model is either
   `action.ee`), `fps` the release's frame rate and `seed` the generation seed; it returns (N, H, W, 3) frames
   (uint8, or numbers in [0, 255]), N = T the episode's reference horizon (one action row per frame: the
   last row repeats the previous action); or
-- batched: a callable with an integer attribute `batch_size` (set it with the `batched(n)` decorator, or on
-  a class) called as `model(requests) -> list of frames`, `requests` a list of at most `batch_size`
+- batched: a callable with an integer attribute `wsp_batch_size` (set it with the `batched(n)` decorator, or
+  on a class; the name is namespaced so that a model wrapper's own `batch_size` never switches the call) called as `model(requests) -> list of frames`, `requests` a list of at most `wsp_batch_size`
   `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
   in order.
 `load_model("module:callable")` finds one.
@@ -60,18 +60,18 @@ class Request(NamedTuple):
 def batched(batch_size: int) -> Callable[[Callable], Callable]:
     """Mark `fn(requests: list[Request]) -> list[frames]` as a batched model taking up to `batch_size` requests."""
     def mark(fn: Callable) -> Callable:
-        fn.batch_size = batch_size
+        fn.wsp_batch_size = batch_size
         return fn
     return mark
 
 
 def batch_size_of(model: object) -> int | None:
     """The model's batch size if it is a batched model, None for a per-episode one (GenerateError if invalid)."""
-    size = getattr(model, "batch_size", None)
+    size = getattr(model, "wsp_batch_size", None)
     if size is None:
         return None
     if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_BATCH:
-        raise GenerateError(f"model batch_size {size!r}: expected an integer from 1 to {MAX_BATCH}")
+        raise GenerateError(f"model wsp_batch_size {size!r}: expected an integer from 1 to {MAX_BATCH}")
     return size
 
 
@@ -216,6 +216,8 @@ def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]
         e.add_note(f"while generating {where}")
         raise
     seconds = time.perf_counter() - start
+    if len(batch) != len(items):
+        raise GenerateError(f"{where}: {len(batch)} frame array(s) for {len(items)} video(s)")
     for frames, (ctx, path) in zip(batch, items):
         frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}")
         path.parent.mkdir(parents=True, exist_ok=True)

@@ -82,9 +82,9 @@ def reference_masks(config_dir: Path, episode_index: int) -> np.ndarray:
     return np.stack([np.asarray(Image.open(io.BytesIO(c))) for c in cells])
 
 
-def object_poses(stored: np.ndarray, objects: int) -> np.ndarray:
-    """Stored `sim.object_poses` rows (T, MAX_OBJECTS·7) → (T, MAX_OBJECTS, 7) float64 with the unused slots
-    (from `objects` on: the length of the episode's `wsp.objects`) NaN, the builders' in-memory convention."""
+def object_poses(stored: np.ndarray) -> np.ndarray:
+    """Stored `sim.object_poses` rows (T, MAX_OBJECTS·7) → (T, MAX_OBJECTS, 7) float64 with each unused slot
+    (all zeros: a quaternion of norm 0, which no real pose has) NaN, the builders' in-memory convention."""
     poses = np.asarray(stored, dtype=np.float64).reshape(len(stored), -1, 7).copy()
-    poses[:, objects:] = np.nan
+    poses[:, ~(np.linalg.norm(poses[0, :, 3:], axis=-1) > 0)] = np.nan
     return poses

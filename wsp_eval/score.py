@@ -38,7 +38,7 @@ from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
-from wsp_eval.release_format import INSTANCES, RELEASE_JSON, load_release
+from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
@@ -218,6 +218,10 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
 
     submission, release, out = Path(submission), Path(release), Path(out)
     rel_meta = load_release(release)
+    if rel_meta.get("version") != BENCHMARK_VERSION:
+        raise ScoreError(f"{release}: release format {rel_meta.get('version')!r}; this evaluator reads "
+                         f"{BENCHMARK_VERSION!r}. Rebuild the release with this version of worldsimprobe (or score "
+                         "with the version that built it)")
     meta, configs = _preflight(submission, release, allow_missing)
     needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
     backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
@@ -226,7 +230,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     rows = {c: _rows(release, c) for c in configs}
     flows = None
     if flow_cache and backends.flow is not None:
-        flows = str(cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}"))
+        folder = cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}")
+        flows = str(folder) if folder else None
     todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows)
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
@@ -261,7 +266,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
         release={"path": str(release), "version": rel_meta["version"],
                  "code_version": str(rel_meta.get("code_version", "")),
                  "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
-        backends=backends.describe(),
+        backends=backends.describe(), reference_flow_cache=flows,
         allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
         problems=problems, copy_check=copy_check(records),
         timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
