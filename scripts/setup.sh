@@ -32,6 +32,7 @@ system_packages() {
     return
   fi
   command -v apt-get >/dev/null || die "apt-get not found: this set-up supports Debian bookworm machines"
+  [ "$(id -u)" = 0 ] || command -v sudo >/dev/null || die "installing system packages needs root or sudo"
   local codename; codename="$(. /etc/os-release; echo "${VERSION_CODENAME:-}")"
   [ "$codename" = bookworm ] || die "expected Debian bookworm, found '${codename:-unknown}'"
   local src=/etc/apt/sources.list.d/wsp-bookworm-backports.sources

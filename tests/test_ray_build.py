@@ -27,9 +27,11 @@ def _files(release) -> dict:
 def test_build_loses_a_node_and_still_matches_a_local_build(tmp_path, t1_release):
     from ray.cluster_utils import Cluster
 
-    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False})
+    small = 200 * 1024 * 1024  # object store per node: a tiny T1 slot is a few MB
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0, "include_dashboard": False,
+                                                            "object_store_memory": small})
     try:
-        nodes = [cluster.add_node(num_cpus=1) for _ in range(2)]  # the head runs no slot: two worker nodes
+        nodes = [cluster.add_node(num_cpus=1, object_store_memory=small) for _ in range(2)]  # the head runs no slot: two worker nodes
         cluster.wait_for_nodes()
         out = tmp_path / "worldsimprobe"
         cmd = [sys.executable, "-m", "wsp_data.cli", "build", "--suite", TINY["suite"], "--platform",
