@@ -95,8 +95,8 @@ def _open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
 
 
 # -- slot decisions -------------------------------------------------------------------------------------
-def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
-    """Try attempts for one slot until one is kept; stage the decision atomically."""
+def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
+    """Try attempts for one slot until one is kept: the decision and the kept instance's rollouts."""
     cfg: BuildConfig = builder.config
     plan = builder.plan(slot)
     record = SlotRecord(slot)
@@ -122,6 +122,12 @@ def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
             record.roles = [r.role for r in out.rollouts]
             rollouts = out.rollouts
             break
+    return record, rollouts
+
+
+def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
+    """`decide` one slot and stage the decision atomically."""
+    record, rollouts = decide(builder, slot)
     staging.write_slot(record, rollouts)
     return record
 
