@@ -38,10 +38,11 @@ class CliError(Exception):
     pass
 
 
-# Modules that only the `build` extra installs (simulators, LeRobot, `datasets`); the scoring-only install
-# (`pip install worldsimprobe`) has none of them, and a command that needs one says so in one line.
+# Modules that only an extra installs (`build`: simulators, LeRobot, `datasets`; `cluster`: Ray); the scoring-only
+# install (`pip install worldsimprobe`) has none of them, and a command that needs one says so in one line.
 BUILD_MODULES = frozenset({"sapien", "mani_skill", "mujoco", "robosuite", "libero", "lerobot", "datasets", "torch",
                            "huggingface_hub", "gymnasium", "OpenGL", "numba", "easydict", "filelock"})
+EXTRA_OF_MODULE = {**dict.fromkeys(BUILD_MODULES, "build"), "ray": "cluster"}
 
 
 def _shard(text: str) -> tuple[int, int]:
@@ -455,14 +456,11 @@ def main(argv: list[str] | None = None) -> int:
         _print_failure_hint()
         return 2
     except ModuleNotFoundError as e:
-        if (e.name or "").split(".")[0] == "ray":
-            print(f"wsp: error: `--executor ray` needs the cluster extra (missing module 'ray'): "
-                  "pip install 'worldsimprobe[cluster]' — `make setup` installs it", file=sys.stderr)
-            return 2
-        if (e.name or "").split(".")[0] not in BUILD_MODULES:
+        extra = EXTRA_OF_MODULE.get((e.name or "").split(".")[0])
+        if extra is None:
             raise
-        print(f"wsp: error: `wsp {args.command}` needs the build extra (missing module {e.name!r}): "
-              "pip install 'worldsimprobe[build]' — or `make setup`, which also installs LIBERO's stack",
+        print(f"wsp: error: `wsp {args.command}` needs the {extra} extra (missing module {e.name!r}): "
+              f"pip install 'worldsimprobe[{extra}]' — or `make setup`, which also installs LIBERO's stack",
               file=sys.stderr)
         return 2
     except KeyboardInterrupt:
