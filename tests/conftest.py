@@ -12,12 +12,13 @@ offline_environment()
 
 import json  # noqa: E402
 import os  # noqa: E402
+import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
 from tiny_releases import LIBERO_SUITES, LIBERO_TASKS, T2_TASKS, TINY, build_config, shared_release  # noqa: E402,F401
-from wsp_eval.release_format import DEFAULT_RELEASE_NAME  # noqa: E402
+from wsp_eval.release_format import DEFAULT_RELEASE_NAME, RELEASE_JSON  # noqa: E402
 
 
 def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...], out: Path | None = None,
@@ -26,6 +27,17 @@ def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...],
     tests that need a build of their own."""
     out = out or tmp_path_factory.mktemp(suite) / DEFAULT_RELEASE_NAME
     return build_config(out, suite, platform, count, tasks, **config)
+
+
+def tiny_build_command(out: Path, *extra: str) -> list[str]:
+    """`wsp build` of the shared `t1` release's config into `out`, as a command line (tests of building itself)."""
+    return [sys.executable, "-m", "wsp_data.cli", "build", "--suite", TINY["suite"], "--platform", TINY["platform"],
+            "--count", str(TINY["count"]), "--tasks", *TINY["tasks"], "--out", str(out), "--quiet", *extra]
+
+
+def release_files(release: Path) -> dict:
+    """path → sha256 of every file a release lists in its release.json."""
+    return json.loads((release / RELEASE_JSON).read_text())["files"]
 
 
 SHARED = ("t1_release", "suites_release", "libero_release")  # in the order the pre-build step finishes them

@@ -8,23 +8,13 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from conftest import TINY
+from conftest import TINY, release_files as _files, tiny_build_command as _build_args
 from wsp_data.schema import RELEASE_JSON, STAGING_DIR
 
 WSP = [sys.executable, "-m", "wsp_data.cli"]
-
-
-def _build_args(out: Path, *extra: str) -> list[str]:
-    return [*WSP, "build", "--suite", TINY["suite"], "--platform", TINY["platform"], "--count", str(TINY["count"]),
-            "--tasks", *TINY["tasks"], "--out", str(out), "--quiet", *extra]
-
-
-def _files(release: Path) -> dict:
-    return json.loads((release / RELEASE_JSON).read_text())["files"]
 
 
 def test_sharded_killed_and_resumed_build_is_byte_identical(tmp_path, t1_release):

@@ -7,21 +7,15 @@ straight local build to compare against is that release.
 
 from __future__ import annotations
 
-import json
 import subprocess
-import sys
 import time
 
 import pytest
 
-from conftest import TINY
-from wsp_data.schema import RELEASE_JSON, STAGING_DIR
+from conftest import TINY, release_files, tiny_build_command
+from wsp_data.schema import STAGING_DIR
 
 ray = pytest.importorskip("ray", reason="the cluster extra (ray) is not installed")
-
-
-def _files(release) -> dict:
-    return json.loads((release / RELEASE_JSON).read_text())["files"]
 
 
 def test_build_loses_a_node_and_still_matches_a_local_build(tmp_path, t1_release):
@@ -34,9 +28,7 @@ def test_build_loses_a_node_and_still_matches_a_local_build(tmp_path, t1_release
         nodes = [cluster.add_node(num_cpus=1, object_store_memory=small) for _ in range(2)]  # the head runs no slot: two worker nodes
         cluster.wait_for_nodes()
         out = tmp_path / "worldsimprobe"
-        cmd = [sys.executable, "-m", "wsp_data.cli", "build", "--suite", TINY["suite"], "--platform",
-               TINY["platform"], "--count", str(TINY["count"]), "--tasks", *TINY["tasks"], "--out", str(out),
-               "--quiet", "--executor", "ray", "--address", cluster.address]
+        cmd = tiny_build_command(out, "--executor", "ray", "--address", cluster.address)
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         staging = out / STAGING_DIR / "t1_maniskill"
         deadline = time.time() + 900
@@ -48,6 +40,6 @@ def test_build_loses_a_node_and_still_matches_a_local_build(tmp_path, t1_release
         stdout, stderr = proc.communicate(timeout=900)
         assert proc.returncode == 0, stderr[-3000:]
         assert decided < TINY["count"] and "kept 4 / 4" in stdout
-        assert _files(out) == _files(t1_release)  # the same checksums as the straight local build
+        assert release_files(out) == release_files(t1_release)  # the same checksums as the straight local build
     finally:
         cluster.shutdown()
