@@ -39,11 +39,8 @@ def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path | 
     h.update(f"\0{backend_name}\0{backend_version}\0{FORMAT}\0".encode())
     h.update(Path(flow.__file__).read_bytes())
     key = h.hexdigest()[:24]
-    bases = [release / SUBDIR]
-    user = os.environ.get("XDG_CACHE_HOME") or os.environ.get("HOME")
-    if user:
-        bases.append(Path(user) / ("" if os.environ.get("XDG_CACHE_HOME") else ".cache") / "worldsimprobe" /
-                     "reference_flows")
+    user = os.environ.get("XDG_CACHE_HOME") or (os.environ.get("HOME") and Path(os.environ["HOME"]) / ".cache")
+    bases = [release / SUBDIR] + ([Path(user) / "worldsimprobe" / "reference_flows"] if user else [])
     for base in bases:
         folder = base / key
         try:

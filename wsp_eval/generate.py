@@ -7,7 +7,8 @@ A model is either
   (uint8, or numbers in [0, 255]), N = T the episode's reference horizon (one action row per frame: the
   last row repeats the previous action); or
 - batched: a callable with an integer attribute `wsp_batch_size` (set it with the `batched(n)` decorator, or
-  on a class; the name is namespaced so that a model wrapper's own `batch_size` never switches the call) called as `model(requests) -> list of frames`, `requests` a list of at most `wsp_batch_size`
+  on a class; namespaced so that a model wrapper's own `batch_size` never switches the call), called as
+  `model(requests) -> list of frames`, `requests` a list of at most `wsp_batch_size`
   `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
   in order.
 `load_model("module:callable")` finds one.
@@ -29,9 +30,9 @@ import platform
 import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import NamedTuple
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow.parquet as pq
