@@ -65,42 +65,41 @@ def write_config(config_dir: Path, config: str, platform: str,
     )
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
-    masks = _MaskWriter(tmp / ROBOT_MASKS)
-    for record, rollouts in instances:
-        row = dict(record.row)
-        indices = []
-        for r in rollouts:
-            index = len(episode_rows)
-            with contextlib.redirect_stderr(io.StringIO()):
-                for frame in _frames(r, row["instruction"], info):
-                    ds.add_frame(frame)
-                ds.save_episode(parallel_encoding=False)
-            masks.add(index, r.mask)
-            indices.append(index)
-            episode_rows.append({
-                "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
-                "wsp.suite": row["suite"], "wsp.platform": platform, "wsp.task": row["task"],
-                "wsp.seed": int(r.seed), "wsp.role": r.role, "wsp.source": row["source"],
-                "wsp.intervention": json.dumps(row.get("interventions", {}).get(r.role, {}), sort_keys=True),
-                "wsp.objects": list(row["objects"]),
-                "wsp.camera_intrinsic": r.intrinsic.reshape(-1).astype(float).tolist(),
-                "wsp.camera_extrinsic": r.extrinsic.reshape(-1).astype(float).tolist(),
-                "wsp.success": bool(r.success[-1]), "wsp.num_frames": int(r.num_frames),
-            })
-        scored = [(r, i) for r, i in zip(rollouts, indices) if r.role != SOURCE_ROLE]
-        row.update(
-            roles=[r.role for r, _ in scored], episode_indices=[i for _, i in scored],
-            episode_ids=[EPISODE_ID.format(index=i) for _, i in scored],
-            num_frames=[int(r.num_frames) for r, _ in scored], success=[bool(r.success[-1]) for r, _ in scored],
-            fps=info.fps, camera_intrinsic=scored[0][0].intrinsic.reshape(-1).astype(float).tolist(),
-            camera_extrinsic=scored[0][0].extrinsic.reshape(-1).astype(float).tolist(),
-        )
-        source = [i for r, i in zip(rollouts, indices) if r.role == SOURCE_ROLE]
-        if source:
-            row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
-        instance_rows.append(row)
-    ds.finalize()
-    masks.close()
+    with contextlib.closing(_MaskWriter(tmp / ROBOT_MASKS)) as masks:  # closed also when a step below raises
+        for record, rollouts in instances:
+            row = dict(record.row)
+            indices = []
+            for r in rollouts:
+                index = len(episode_rows)
+                with contextlib.redirect_stderr(io.StringIO()):
+                    for frame in _frames(r, row["instruction"], info):
+                        ds.add_frame(frame)
+                    ds.save_episode(parallel_encoding=False)
+                masks.add(index, r.mask)
+                indices.append(index)
+                episode_rows.append({
+                    "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
+                    "wsp.suite": row["suite"], "wsp.platform": platform, "wsp.task": row["task"],
+                    "wsp.seed": int(r.seed), "wsp.role": r.role, "wsp.source": row["source"],
+                    "wsp.intervention": json.dumps(row.get("interventions", {}).get(r.role, {}), sort_keys=True),
+                    "wsp.objects": list(row["objects"]),
+                    "wsp.camera_intrinsic": r.intrinsic.reshape(-1).astype(float).tolist(),
+                    "wsp.camera_extrinsic": r.extrinsic.reshape(-1).astype(float).tolist(),
+                    "wsp.success": bool(r.success[-1]), "wsp.num_frames": int(r.num_frames),
+                })
+            scored = [(r, i) for r, i in zip(rollouts, indices) if r.role != SOURCE_ROLE]
+            row.update(
+                roles=[r.role for r, _ in scored], episode_indices=[i for _, i in scored],
+                episode_ids=[EPISODE_ID.format(index=i) for _, i in scored],
+                num_frames=[int(r.num_frames) for r, _ in scored], success=[bool(r.success[-1]) for r, _ in scored],
+                fps=info.fps, camera_intrinsic=scored[0][0].intrinsic.reshape(-1).astype(float).tolist(),
+                camera_extrinsic=scored[0][0].extrinsic.reshape(-1).astype(float).tolist(),
+            )
+            source = [i for r, i in zip(rollouts, indices) if r.role == SOURCE_ROLE]
+            if source:
+                row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
+            instance_rows.append(row)
+        ds.finalize()
     _set_split(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
     _drop_fingerprints(tmp)
     _append_episode_columns(tmp, episode_rows)
