@@ -17,7 +17,10 @@
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
   submission, release and backends skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
-  single-threaded).
+  single-threaded); or, with `executor="ray"`, as Ray tasks on a cluster (`wsp_eval.ray_tasks`; identical scores).
+  Tasks carry paths, not videos: every node reads the release, the submission and the reference-flow cache at
+  the same paths (a shared file system, or the same copy on each node), which is cheaper than shipping
+  gigabytes of video through Ray's object store.
 - Reference flows (T2, T3) are computed once per release and flow backend and reused by later scorings of any
   submission (`wsp_eval.flow_cache`); `flow_cache=False` recomputes them.
 """
@@ -208,9 +211,11 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
 
 def score_submission(submission: Path, release: Path, out: Path, *, spec: BackendSpec = BackendSpec(),
                      workers: int = 1, allow_missing: bool = False, accept_lossy: bool = False,
-                     progress: bool = True, flow_cache: bool = True) -> dict:
+                     progress: bool = True, flow_cache: bool = True, executor: str = "local",
+                     address: str | None = None) -> dict:
     """Score `submission` against `release`; write the reports under `out`; return the report dict. With
-    `flow_cache`, RMFA's reference flows come from (and go to) the release's reference-flow cache."""
+    `flow_cache`, RMFA's reference flows come from (and go to) the release's reference-flow cache. `executor`
+    "ray" scores on a Ray cluster (`address`, or a local instance with `workers` CPUs)."""
     from tqdm import tqdm
 
     from wsp_eval.report import write_reports
@@ -244,7 +249,12 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
             cache.flush()
             bar.update()
 
-        if workers <= 1:
+        if executor == "ray":
+            from wsp_eval.ray_tasks import ray_imap
+
+            for record in ray_imap(_worker, [(j, spec) for j in todo], workers, address):
+                keep(record)
+        elif workers <= 1:
             for job in todo:
                 keep(score_instance(job, spec))
         else:
@@ -269,7 +279,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
         backends=backends.describe(), reference_flow_cache=flows,
         allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
         problems=problems, copy_check=copy_check(records),
-        timing={"seconds": time.perf_counter() - start, "workers": workers, "instances": len(todo)},
+        timing={"seconds": time.perf_counter() - start, "workers": workers, "executor": executor,
+                "instances": len(todo)},
         instances=records,
     )
     report["strips"] = write_strips(records, rows, release, submission, out)
