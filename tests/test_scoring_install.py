@@ -70,3 +70,5 @@ def test_scoring_install_scores_as_the_full_install(lite, suites_release, tmp_pa
     build = _wsp(lite, "build", "--platform", "maniskill", "--suite", "t1", "--count", "1", "--out", "x", cwd=tmp_path)
     assert build.returncode == 2 and "worldsimprobe[build]" in build.stderr
     assert len(build.stderr.strip().splitlines()) == 1 and "Traceback" not in build.stderr
+    gen = _wsp(lite, "generate", "--model", "reference", "--release", str(suites_release), "--out", "g", cwd=tmp_path)
+    assert gen.returncode == 2 and "worldsimprobe[train]" in gen.stderr and "Traceback" not in gen.stderr

@@ -104,7 +104,8 @@ def parser() -> argparse.ArgumentParser:
     bl.add_argument("--out", type=Path, required=True)
     bl.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     g = sub.add_parser("generate", help="run a model callable over a release and write a submission")
-    g.add_argument("--model", required=True, help="MODULE:CALLABLE taking (first_frame, actions, fps, seed)")
+    g.add_argument("--model", required=True, help="MODULE:CALLABLE taking (first_frame, actions, fps, seed), or a "
+                                                   "batched one (README), or a registered name: reference")
     g.add_argument("--name", help="model name for submission.json (default: the MODULE:CALLABLE)")
     g.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     g.add_argument("--out", type=Path, required=True)
@@ -171,6 +172,11 @@ def _score_options(p: argparse.ArgumentParser) -> None:
     from wsp_eval.backends import FLOW, JUDGE, TRACKER
 
     p.add_argument("--workers", type=_positive, default=1, help="scoring processes (default 1)")
+    p.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="local processes (default) or ray (instances as Ray tasks; every node reads the release "
+                        "and submission at the same paths)")
+    p.add_argument("--address", help="with --executor ray: the cluster to join (`auto`, host:port); default: a "
+                                     "local Ray instance with --workers CPUs")
     p.add_argument("--allow-missing", action="store_true", help="score missing or unusable videos as 0")
     p.add_argument("--accept-lossy", action="store_true",
                    help="score lossy or chroma-subsampled videos instead of refusing them (the report says so; "
@@ -313,7 +319,8 @@ def _score(submission: Path, release: Path, out: Path, args) -> dict:
     try:
         return score_submission(submission, release, out, spec=_spec(args), workers=args.workers,
                                 allow_missing=args.allow_missing, accept_lossy=args.accept_lossy,
-                                progress=not args.quiet, flow_cache=not args.no_flow_cache)
+                                progress=not args.quiet, flow_cache=not args.no_flow_cache,
+                                executor=args.executor, address=args.address)
     except (ScoreError, BackendUnavailable) as e:
         raise CliError(str(e)) from None
 

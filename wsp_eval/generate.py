@@ -11,7 +11,9 @@ A model is either
   `model(requests) -> list of frames`, `requests` a list of at most `wsp_batch_size`
   `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
   in order.
-`load_model("module:callable")` finds one.
+`load_model("module:callable")` finds one, or `load_model(name)` one registered in `MODELS` (a zero-argument
+factory; built in: `reference`, the reference world model of `wsp_models`, which needs the `train` extra). A model
+may carry a dict `wsp_info` (its version, checkpoints); it is written into submission.json as `model_info`.
 
 `write_submission` is the loop shared with the calibration baselines: each video is written to a temp name
 in its folder and renamed into place, so a killed run never leaves a truncated mp4, and the same call run
@@ -40,6 +42,7 @@ from tqdm import tqdm
 
 from wsp_eval.console import terminal
 from wsp_eval.episode import EpisodeContext
+from wsp_eval.registry import Registry
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES
 from wsp_eval.submission import SUBMISSION_JSON, VIDEO_NAME, test_configs
 from wsp_eval.video import write_video
@@ -87,12 +90,30 @@ class GenerateResult:
     seconds: float  # spent producing frames in this call
 
 
+def _reference_model() -> Model:
+    from wsp_models.reference.model import ReferenceModel
+
+    return ReferenceModel()
+
+
+MODELS: Registry[Callable[[], Model]] = Registry("model", "worldsimprobe.models")
+MODELS.register("reference", _reference_model)
+
+
 def load_model(spec: str) -> Model:
-    """The callable named by "module:callable" (the attribute may be dotted: "module:Class.method"). The
-    current directory is put on the module search path (as `python -m` does), so a model file there imports."""
+    """The model registered in `MODELS` as `spec`, or the callable named by "module:callable" (the attribute may
+    be dotted: "module:Class.method"). The current directory is put on the module search path (as `python -m`
+    does), so a model file there imports."""
     module_name, sep, attr = spec.partition(":")
+    if not sep and spec in MODELS:
+        try:
+            return MODELS[spec]()
+        except ModuleNotFoundError as e:
+            raise GenerateError(f"model {spec!r} needs the train extra (missing module {e.name!r}): "
+                                "pip install 'worldsimprobe[train]', or `make setup`") from None
     if not (sep and module_name and attr):
-        raise GenerateError(f"model {spec!r}: expected 'module:callable'")
+        raise GenerateError(f"model {spec!r}: expected 'module:callable' or a registered name "
+                            f"({', '.join(MODELS)})")
     if os.getcwd() not in sys.path and "" not in sys.path:
         sys.path.insert(0, os.getcwd())
     try:
@@ -133,12 +154,14 @@ def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (
                                     "returns a list with one frame array per request, in order")
             return list(frames)
 
+    info = getattr(model, "wsp_info", None)
     return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress,
-                            batch_size=size or 1)
+                            batch_size=size or 1, info=info if isinstance(info, dict) else None)
 
 
 def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds: Sequence[int],
-                     configs: Sequence[str] | None = None, name: str, progress: bool, batch_size: int = 1) -> GenerateResult:
+                     configs: Sequence[str] | None = None, name: str, progress: bool, batch_size: int = 1,
+                     info: dict | None = None) -> GenerateResult:
     """Write `produce(contexts)` (a list of frames per list of up to `batch_size` episode contexts) for every
     scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`, skipping videos already there, then
     submission.json."""
@@ -157,7 +180,7 @@ def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds:
         if pending:
             seconds += _write_batch(produce, pending)
             written += len(pending)
-            _write_manifest(out, name, seeds, configs, before + seconds)
+            _write_manifest(out, name, seeds, configs, before + seconds, info)
             bar.update(len(pending))
             pending.clear()
 
@@ -175,7 +198,7 @@ def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds:
                 if len(pending) >= batch_size:
                     flush()
         flush()
-    _write_manifest(out, name, seeds, configs, before + seconds)
+    _write_manifest(out, name, seeds, configs, before + seconds, info)
     return GenerateResult(written, skipped, seconds)
 
 
@@ -277,9 +300,12 @@ def _previous_seconds(out: Path, name: str) -> float:
     return float(previous) if isinstance(previous, (int, float)) else 0.0
 
 
-def _write_manifest(out: Path, name: str, seeds: list[int], configs: list[str], seconds: float) -> None:
+def _write_manifest(out: Path, name: str, seeds: list[int], configs: list[str], seconds: float,
+                    info: dict | None = None) -> None:
     meta = {"model": name, "benchmark_version": BENCHMARK_VERSION, "seeds": seeds, "configs": configs,
             "hardware": platform.processor() or platform.machine(), "generation_seconds": round(seconds, 3)}
+    if info:
+        meta["model_info"] = info
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".{SUBMISSION_JSON}.partial"
     tmp.write_text(json.dumps(meta, indent=1))

@@ -1,6 +1,6 @@
 """The submission contract (DESIGN "Submission layout") and its validate-only check.
 
-    <submission>/submission.json            model, benchmark_version, seeds [, configs, hardware, generation_seconds]
+    <submission>/submission.json            model, benchmark_version, seeds [, configs, hardware, generation_seconds, model_info]
     <submission>/<config>/<episode_id>/seed<k>.mp4
 
 `validate` lists every problem at once, each naming the file: missing or extra files, unreadable or

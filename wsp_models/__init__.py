@@ -1,0 +1,1 @@
+"""World models written here (torch; the `train` extra). The scoring-only install never imports this package."""

@@ -1,0 +1,1 @@
+"""The reference world model: network, training data, training loop, and the batched `wsp generate` model."""

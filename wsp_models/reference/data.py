@@ -1,0 +1,74 @@
+"""The training data of the reference world model: every episode of a `train_<platform>` config, decoded once
+into memory (frames uint8, action features float32)."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pyarrow.parquet as pq
+from tqdm import tqdm
+
+from wsp_eval.console import terminal
+from wsp_eval.episode import EpisodeContext
+from wsp_eval.release_format import INSTANCES
+from wsp_models.reference.network import condition
+
+VALIDATION_EVERY = 10  # every 10th episode (by position in the config; the last one if there are fewer than 10)
+#   is held out for the validation loss
+
+
+@dataclass
+class Episodes:
+    frames: list[np.ndarray]  # per episode (T, S, S, 3) uint8
+    features: list[np.ndarray]  # per episode (T, F) float32, `condition` of its actions
+    ids: list[str]
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    @property
+    def num_frames(self) -> int:
+        return sum(len(f) for f in self.frames)
+
+
+class DataError(RuntimeError):
+    """A release that cannot train the model; the message names the folder and the problem."""
+
+
+def load_split(release: Path, config: str, size: int, progress: bool = True) -> tuple[Episodes, Episodes, dict]:
+    """(training episodes, validation episodes, facts about the data: fps, action width, checksum)."""
+    path = Path(release) / config / INSTANCES
+    if not path.is_file():
+        raise DataError(f"{path}: not found; build the split first (`wsp build --suite train ...`)")
+    rows = pq.read_table(path).to_pylist()
+    if len(rows) < 2:
+        raise DataError(f"{path}: holds {len(rows)} episode(s); training needs at least 2 (one is held out)")
+    held_out = set(range(VALIDATION_EVERY - 1, len(rows), VALIDATION_EVERY)) or {len(rows) - 1}
+    train, val = Episodes([], [], []), Episodes([], [], [])
+    digest = hashlib.sha256()
+    fps = float(rows[0]["fps"])
+    for i, row in enumerate(tqdm(rows, desc=f"read {config}", unit="episode", disable=not progress, file=terminal())):
+        ctx = EpisodeContext(Path(release), config, row, row["roles"][0], int(row["episode_indices"][0]),
+                             float(row["fps"]), 0)
+        frames = _resized(ctx.frames(), size)
+        actions = ctx.actions()
+        n = min(len(frames), len(actions))
+        digest.update(frames[:n].tobytes())
+        digest.update(np.ascontiguousarray(actions[:n]).tobytes())
+        part = val if i in held_out else train
+        part.frames.append(frames[:n])
+        part.features.append(condition(actions[:n], fps))
+        part.ids.append(ctx.episode_id)
+    facts = {"config": config, "episodes": len(rows), "frames": train.num_frames + val.num_frames, "fps": fps,
+             "action_dim": int(actions.shape[1]), "sha256": digest.hexdigest()}
+    return train, val, facts
+
+
+def _resized(frames: np.ndarray, size: int) -> np.ndarray:
+    if frames.shape[1:3] == (size, size):
+        return np.ascontiguousarray(frames)
+    return np.stack([cv2.resize(f, (size, size), interpolation=cv2.INTER_AREA) for f in frames])
