@@ -59,7 +59,7 @@ class ReferenceModel:
         h, w = first.shape[:2]
         frame0 = first if (h, w) == (size, size) else cv2.resize(first, (size, size), interpolation=cv2.INTER_AREA)
         feats = torch.from_numpy((condition(actions, fps) - mean) / std).float()
-        x0 = torch.from_numpy(np.ascontiguousarray(frame0)).permute(2, 0, 1).float().div(255)[None]
+        x0 = torch.tensor(frame0).permute(2, 0, 1).float().div(255)[None]  # a copy: frame 0 may be read-only
         out = []
         for i in range(0, len(feats), CHUNK):
             f = feats[i:i + CHUNK]
