@@ -23,7 +23,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from wsp_eval.baselines import write_baseline  # noqa: E402
-from wsp_eval.generate import generate, load_model  # noqa: E402
+from wsp_eval.generate import episode_contexts, generate, load_model  # noqa: E402
 from wsp_eval.score import score_submission  # noqa: E402
 from wsp_eval.video import read_video  # noqa: E402
 
@@ -50,7 +50,7 @@ def main() -> int:
     t1_scatter(reports[MODEL], args.out / "t1_scatter.png")
     for config in sorted({r["config"] for r in reports[MODEL]["instances"]}):
         if config.startswith(("t2_", "t1_")):
-            strip(args.release, args.out / MODEL, reports[MODEL], config, args.out / f"strip_{config}.png")
+            strip(args.release, args.out / MODEL, config, args.out / f"strip_{config}.png")
     meta = json.loads((args.out / MODEL / "submission.json").read_text())
     print(f"generation: {meta['generation_seconds']:.0f} s on {meta['hardware']}")
     return 0
@@ -103,14 +103,9 @@ def t1_scatter(report: dict, out: Path) -> None:
     plt.close(fig)
 
 
-def strip(release: Path, submission: Path, report: dict, config: str, out: Path, columns: int = 6) -> None:
+def strip(release: Path, submission: Path, config: str, out: Path, columns: int = 6) -> None:
     """Reference frames (top) and generated frames (bottom) of the config's first instance, evenly spaced."""
-    from wsp_eval.episode import EpisodeContext
-    import pyarrow.parquet as pq
-    from wsp_eval.release_format import INSTANCES
-
-    row = pq.read_table(release / config / INSTANCES).to_pylist()[0]
-    ctx = EpisodeContext(release, config, row, row["roles"][0], int(row["episode_indices"][0]), float(row["fps"]), 0)
+    ctx = next(episode_contexts(release, [config]))
     ref = ctx.frames()
     gen = read_video(submission / config / ctx.episode_id / "seed0.mp4")[0]
     idx = np.linspace(0, min(len(ref), len(gen)) - 1, columns).round().astype(int)
@@ -120,7 +115,7 @@ def strip(release: Path, submission: Path, report: dict, config: str, out: Path,
     ax.imshow(grid)
     ax.set_xticks([(k + 0.5) * ref.shape[2] for k in range(columns)], [f"t={i / ctx.fps:.1f}s" for i in idx])
     ax.set_yticks([ref.shape[1] / 2, ref.shape[1] * 1.5], ["simulator", "reference\nmodel"])
-    ax.set_title(f"{config}, {row['task']}", fontsize=9)
+    ax.set_title(f"{config}, {ctx.row['task']}", fontsize=9)
     fig.tight_layout()
     fig.savefig(out)
     plt.close(fig)

@@ -13,6 +13,7 @@ last saved state). `docs/reference_model.md` has the recipe, the data and what i
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import subprocess
 import sys
@@ -68,8 +69,6 @@ def main() -> int:
 
 
 def plot_history(history: Path, out: Path) -> None:
-    import json
-
     h = json.loads(history.read_text())
     fig, ax = plt.subplots(figsize=(6, 3.2), dpi=120)
     for name, rows in (("train (mean of 25 steps)", h["train"]), ("validation (held-out episodes)", h["val"])):

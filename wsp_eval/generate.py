@@ -147,12 +147,7 @@ def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (
             return [model(*request(ctx)) for ctx in ctxs]
     else:
         def produce(ctxs: list[EpisodeContext]) -> list[np.ndarray]:
-            frames = model([request(ctx) for ctx in ctxs])
-            if not isinstance(frames, (list, tuple)) or len(frames) != len(ctxs):
-                got = f"{len(frames)} item(s)" if isinstance(frames, (list, tuple)) else f"a {type(frames).__name__}"
-                raise GenerateError(f"batched model: asked for {len(ctxs)} video(s), returned {got}; a batched model "
-                                    "returns a list with one frame array per request, in order")
-            return list(frames)
+            return model([request(ctx) for ctx in ctxs])  # checked in `_write_batch`
 
     info = getattr(model, "wsp_info", None)
     return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress,
@@ -185,7 +180,7 @@ def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds:
             pending.clear()
 
     with tqdm(total=total, desc=name, unit="video", disable=not progress, file=terminal()) as bar:
-        for ctx in _episodes(release, configs, seeds[0]):
+        for ctx in episode_contexts(release, configs, seeds[0]):
             for seed in seeds:
                 path = out / ctx.config / ctx.episode_id / VIDEO_NAME.format(seed=seed)
                 if path.exists():
@@ -240,8 +235,10 @@ def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]
         e.add_note(f"while generating {where}")
         raise
     seconds = time.perf_counter() - start
-    if len(batch) != len(items):
-        raise GenerateError(f"{where}: {len(batch)} frame array(s) for {len(items)} video(s)")
+    if not isinstance(batch, (list, tuple)) or len(batch) != len(items):
+        got = f"{len(batch)} item(s)" if isinstance(batch, (list, tuple)) else f"a {type(batch).__name__}"
+        raise GenerateError(f"{where}: asked for {len(items)} video(s), returned {got}; a batched model returns a "
+                            "list with one frame array per request, in order")
     for frames, (ctx, path) in zip(batch, items):
         frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}")
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -254,8 +251,9 @@ def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]
     return seconds
 
 
-def _episodes(release: Path, configs: list[str], seed: int) -> Iterator[EpisodeContext]:
-    """One context per scored episode, lazily (each holds its decoded frames until dropped)."""
+def episode_contexts(release: Path, configs: Sequence[str], seed: int = 0) -> Iterator[EpisodeContext]:
+    """One context per scored episode of `configs` (per role of each instance row, in table order), lazily (each
+    holds its decoded frames until dropped)."""
     for config in configs:
         for row in pq.read_table(release / config / INSTANCES).to_pylist():
             for role, index in zip(row["roles"], row["episode_indices"]):

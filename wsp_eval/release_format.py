@@ -45,7 +45,8 @@ IMAGE_SIZE = 128
 MAX_OBJECTS = 4  # object pose / contact slots per frame; the episode's `wsp.objects` lists the used ones
 # Simulator ground truth per frame, outside LeRobot's `observation.*` namespace (never a policy input): world
 # poses of the objects in `wsp.objects` (xyz + quaternion wxyz; a slot with no object in this rollout — unused,
-# or an object only the instance's reference adds — is all zeros, which no real pose is: its quaternion has norm 0) and robot–object contact flags (1.0 / 0.0; 0 in unused slots).
+# or an object only the instance's reference adds — is all zeros, which no real pose is: its quaternion has
+# norm 0) and robot–object contact flags (1.0 / 0.0; 0 in unused slots).
 OBJECT_POSES_KEY = "sim.object_poses"
 CONTACTS_KEY = "sim.contacts"
 

@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 from tqdm import tqdm
 
 from wsp_eval.console import terminal
-from wsp_eval.episode import EpisodeContext
+from wsp_eval.generate import episode_contexts
 from wsp_eval.release_format import INSTANCES
 from wsp_models.reference.network import condition
 
@@ -44,16 +44,15 @@ def load_split(release: Path, config: str, size: int, progress: bool = True) -> 
     path = Path(release) / config / INSTANCES
     if not path.is_file():
         raise DataError(f"{path}: not found; build the split first (`wsp build --suite train ...`)")
-    rows = pq.read_table(path).to_pylist()
-    if len(rows) < 2:
-        raise DataError(f"{path}: holds {len(rows)} episode(s); training needs at least 2 (one is held out)")
-    held_out = set(range(VALIDATION_EVERY - 1, len(rows), VALIDATION_EVERY)) or {len(rows) - 1}
+    count = pq.ParquetFile(path).metadata.num_rows  # one expert episode per row
+    if count < 2:
+        raise DataError(f"{path}: holds {count} episode(s); training needs at least 2 (one is held out)")
+    held_out = set(range(VALIDATION_EVERY - 1, count, VALIDATION_EVERY)) or {count - 1}
     train, val = Episodes([], [], []), Episodes([], [], [])
     digest = hashlib.sha256()
-    fps = float(rows[0]["fps"])
-    for i, row in enumerate(tqdm(rows, desc=f"read {config}", unit="episode", disable=not progress, file=terminal())):
-        ctx = EpisodeContext(Path(release), config, row, row["roles"][0], int(row["episode_indices"][0]),
-                             float(row["fps"]), 0)
+    contexts = episode_contexts(Path(release), [config])  # lazily: each context's decoded video is dropped after use
+    for i, ctx in enumerate(tqdm(contexts, total=count, desc=f"read {config}", unit="episode", disable=not progress,
+                                 file=terminal())):
         frames = _resized(ctx.frames(), size)
         actions = ctx.actions()
         n = min(len(frames), len(actions))
@@ -61,9 +60,9 @@ def load_split(release: Path, config: str, size: int, progress: bool = True) -> 
         digest.update(np.ascontiguousarray(actions[:n]).tobytes())
         part = val if i in held_out else train
         part.frames.append(frames[:n])
-        part.features.append(condition(actions[:n], fps))
+        part.features.append(condition(actions[:n], ctx.fps))
         part.ids.append(ctx.episode_id)
-    facts = {"config": config, "episodes": len(rows), "frames": train.num_frames + val.num_frames, "fps": fps,
+    facts = {"config": config, "episodes": count, "frames": train.num_frames + val.num_frames, "fps": ctx.fps,
              "action_dim": int(actions.shape[1]), "sha256": digest.hexdigest()}
     return train, val, facts
 

@@ -30,7 +30,7 @@ class ReferenceModel:
         self.nets: dict[int, tuple[ReferenceNet, np.ndarray, np.ndarray, dict]] = {}
         for path in sorted(Path(checkpoints).glob("*.pt")):
             ckpt = torch.load(path, map_location="cpu", weights_only=False)
-            net = ReferenceNet(NetConfig(**{**ckpt["record"]["net"], "widths": tuple(ckpt["record"]["net"]["widths"])}))
+            net = ReferenceNet(NetConfig(**ckpt["record"]["net"]))
             net.load_state_dict(ckpt["state_dict"])
             net.eval()
             self.nets[ckpt["record"]["data"]["action_dim"]] = (net, ckpt["feature_mean"], ckpt["feature_std"],
@@ -38,10 +38,7 @@ class ReferenceModel:
         if not self.nets:
             raise GenerateError(f"{checkpoints}: no reference-model checkpoint (*.pt); train one with "
                                 "scripts/train_reference_model.py")
-        self.wsp_info = {"reference_model": {r["platform"]: {k: r[k] for k in ("format", "parameters", "torch",
-                                                                              "train_seconds", "hardware")}
-                                             | {"data_sha256": r["data"]["sha256"], "steps": r["recipe"]["steps"]}
-                                             for *_, r in self.nets.values()},
+        self.wsp_info = {"reference_model": {r["platform"]: _summary(r) for *_, r in self.nets.values()},
                          "generation_threads": threads}
 
     def __call__(self, requests: list[Request]) -> list[np.ndarray]:
@@ -70,3 +67,9 @@ class ReferenceModel:
             frames = np.stack([cv2.resize(f, (w, h), interpolation=cv2.INTER_LINEAR) for f in frames])
         frames[0] = first
         return frames
+
+
+def _summary(record: dict) -> dict:
+    """What submission.json says of one checkpoint: its training record's identifying fields."""
+    keys = ("format", "parameters", "torch", "train_seconds", "hardware")
+    return {**{k: record[k] for k in keys}, "data_sha256": record["data"]["sha256"], "steps": record["recipe"]["steps"]}
