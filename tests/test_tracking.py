@@ -150,6 +150,101 @@ def test_textureless_object_is_tracked_by_its_edges_or_not_at_all():
     assert m.textured_points == 0 and m.displacement == 0.0
 
 
+# -- the colour-region stage (the evaluated object when its colour is distinct) ---------------------------
+BLUE, WOOD = (59, 102, 188), (180, 100, 60)  # a ManiSkill cube's blue on an orange, wood-like table
+CUBE_AT = (120, 140)
+
+
+def wood(seed: int = 4) -> np.ndarray:
+    """A textured orange table (RGB, scoring frame): the wood colour modulated by ±25 % of smoothed noise."""
+    shade = 1.0 + 0.5 * (texture(S, seed).astype(np.float32) / 255.0 - 0.5)
+    return np.clip(np.array(WOOD, np.float32)[None, None] * shade[..., None], 0, 255).astype(np.uint8)
+
+
+def colour_scene(n: int, cube_at, hand_at_=None, hand_size: int = 14, extra: tuple | None = None) -> np.ndarray:
+    """n RGB frames: a 7 px blue cube (smaller than the query grid, as in ManiSkill) at cube_at(t) (None: not
+    drawn) on the wood, and optionally a grey textured hand (hand_size px) at hand_at_(t) drawn over it;
+    `extra` is a second blue cube fixed at that position."""
+    hand = cv2.cvtColor(texture(hand_size, 2), cv2.COLOR_GRAY2RGB)
+    frames = []
+    for t in range(n):
+        img = wood().copy()
+        for at in ([cube_at(t)] if cube_at(t) is not None else []) + ([extra] if extra else []):
+            x, y = at
+            img[y - 3:y + 4, x - 3:x + 4] = BLUE
+        if hand_at_ is not None:
+            x, y = hand_at_(t)
+            h = hand_size // 2
+            img[y - h:y - h + hand_size, x - h:x - h + hand_size] = hand
+        frames.append(img)
+    return np.stack(frames)
+
+
+def far_hand_mask() -> np.ndarray:
+    """A robot mask (label 2) away from the cube, on grey pixels: the blue covers none of the robot."""
+    m = np.zeros((S, S), np.uint8)
+    m[20:50, 20:50] = 2
+    return m
+
+
+def test_colour_region_follows_a_cube_smaller_than_the_query_grid():
+    """The 7 px cube slides (20, −8) px over 11 frames: the grid follows its colour region, d = ‖shift‖ (the
+    region's centroid is exact for a fully visible square: 0.1 px)."""
+    n, shift = 11, (20, -8)
+    frames = colour_scene(n, lambda t: (CUBE_AT[0] + round(shift[0] * t / (n - 1)), CUBE_AT[1] + round(shift[1] * t / (n - 1))))
+    video = tr.scoring_video(frames)
+    assert tr.colour_model(video.rgb[0], np.array(CUBE_AT, float), far_hand_mask()) is not None
+    m = tr.object_motion(video, np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement == pytest.approx(np.hypot(*shift), abs=0.1)
+    assert m.visible_fraction == 1.0 and m.textured_points == 9
+
+
+def test_a_grasped_cube_half_covered_by_the_fingers_is_still_followed():
+    """A grey hand covers the cube's left half while carrying it 24 px up: the visible sliver (≥ 5 % of the
+    frame-0 area) is followed; its centroid sits 2 px right of the cube's centre, so d = 24 ± 2."""
+    n = 13
+    path = lambda t: (CUBE_AT[0], CUBE_AT[1] - 2 * t)  # noqa: E731
+    frames = colour_scene(n, path, hand_at_=lambda t: (path(t)[0] - 7 if t else 200, path(t)[1]), hand_size=16)
+    m = tr.object_motion(tr.scoring_video(frames), np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement == pytest.approx(24, abs=2) and m.visible_fraction == 1.0
+
+
+def test_a_hidden_cube_is_invisible_and_keeps_its_place():
+    """A still cube covered entirely by a passing hand in frames 4–8: invisible there (the occlusion rule),
+    its last position kept, so d ≈ 0 and the visible fraction is 9/14."""
+    n = 14
+    frames = colour_scene(n, lambda t: CUBE_AT, hand_at_=lambda t: CUBE_AT if 4 <= t <= 8 else (200, 40), hand_size=16)
+    m = tr.object_motion(tr.scoring_video(frames), np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement < 0.1 and m.visible_fraction == pytest.approx(9 / 14)
+
+
+def test_the_region_does_not_jump_to_another_cube_of_the_same_colour():
+    """The cube vanishes after frame 0 while a second blue cube sits 60 px away (beyond REGION_JUMP_MAX): the
+    object is invisible from frame 1 on (a tracking failure for T4), not moved by 60 px."""
+    n = 8
+    frames = colour_scene(n, lambda t: CUBE_AT if t == 0 else None, extra=(CUBE_AT[0] + 60, CUBE_AT[1]))
+    m = tr.object_motion(tr.scoring_video(frames), np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement == 0.0 and m.visible_fraction == pytest.approx(1 / n)
+
+
+def test_a_colour_that_is_not_distinct_falls_back_to_lk():
+    """No colour model (LK tracks the grid instead) when the object's colour covers the robot (the region
+    could follow the gripper), when it leaks into a large same-coloured area, or when the video is grey."""
+    frames = colour_scene(3, lambda t: CUBE_AT)
+    rgb0 = tr.scoring_video(frames).rgb[0]
+    blue_robot = far_hand_mask()
+    assert tr.colour_model(rgb0, np.array(CUBE_AT, float), blue_robot) is not None
+    rgb_blue_hand = rgb0.copy()
+    rgb_blue_hand[20:50, 20:50] = BLUE
+    assert tr.colour_model(rgb_blue_hand, np.array(CUBE_AT, float), blue_robot) is None
+    blue_table = rgb0.copy()
+    blue_table[CUBE_AT[1]:CUBE_AT[1] + 60, CUBE_AT[0] - 30:CUBE_AT[0] + 30] = BLUE
+    assert tr.colour_model(blue_table, np.array(CUBE_AT, float), blue_robot) is None
+    grey = tr.scoring_video(frames[..., 0])
+    assert grey.rgb is None
+    assert tr.object_tracks(grey, np.array(CUBE_AT, float), blue_robot).visible.shape == (3, 9)
+
+
 # -- motion gate -------------------------------------------------------------------------------------
 def test_gate_measures_the_hand_displacement():
     """The hand moves (30, 40) px in a straight line: max pairwise distance of first/middle/last = 50."""

@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from wsp_eval.reference import reference_frames
+from wsp_eval.reference import reference_frames, reference_masks
 from wsp_eval.submission import Expected
 from wsp_eval.video import VideoError, read_video
 
@@ -64,11 +64,11 @@ def _tiles(frames: np.ndarray, mark: tuple[float, float] | None, path: np.ndarra
     return np.hstack(tiles)
 
 
-def tracked_path(frames: np.ndarray, object_px) -> np.ndarray:
+def tracked_path(frames: np.ndarray, object_px, robot_mask0: np.ndarray) -> np.ndarray:
     """T4's object centroid through a video (`wsp_eval.tracking`, default tracker), scoring-frame pixels."""
-    from wsp_eval.tracking import object_path, scoring_frames
+    from wsp_eval.tracking import object_path, scoring_video
 
-    return object_path(scoring_frames(frames), np.asarray(object_px, float))[1]
+    return object_path(scoring_video(frames), np.asarray(object_px, float), robot_mask0)[1]
 
 
 def write_strips(records: list[dict], rows: dict[str, list[dict]], release: Path, submission: Path,
@@ -89,7 +89,8 @@ def write_strips(records: list[dict], rows: dict[str, list[dict]], release: Path
                 continue
             reference = reference_frames(release / config, row["episode_indices"][k])
             mark = row.get("object_pixel_256") if rec["suite"] in ("t4", "t5") else None
-            path = tracked_path(generated, mark) if rec["suite"] == "t4" else None
+            path = (tracked_path(generated, mark, reference_masks(release / config, row["episode_indices"][k])[0])
+                    if rec["suite"] == "t4" else None)
             image = np.vstack([_tiles(generated, mark, path), np.full((4, COLUMNS * TILE, 3), 255, np.uint8),
                                _tiles(reference, mark)])
             file = Path(STRIPS_DIR) / config / f"{n + 1}.png"

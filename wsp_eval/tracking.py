@@ -20,6 +20,19 @@ background) is never visible: textureless objects are handled by the points arou
 object's edges and the table.
 A centroid moves by the mean displacement of its visible points (so points dropping in and out do not shift
 it); with no visible point it carries its last value forward.
+
+The evaluated object goes first through a *colour-region* stage (`object_tracks`): when its frame-0 colour is
+distinct (its region of that colour is compact around the object and covers almost none of the robot), the
+whole query grid follows that region — visible in a frame when a region of the object's colour, at least
+`REGION_PART_MIN` of its frame-0 area, lies within `REGION_JUMP_MAX` px of its last position. Why: the SPEC's
+grid (radius 10 px) is wider than a ManiSkill cube (6–8 px in the scoring frame), so most query points sit on
+the table, and grey LK loses the object's own points as soon as the fingers close on it; the table points stay
+visible and still, and a carried-away object went undetected (68 % detection of true motions over 10 px, 6 %
+false alarms, `docs/validity.md` §2). Colour survives where grey texture does not: a blue cube on orange wood,
+a grasped red cube between grey fingers. Where the colour is not distinct (textured or dark LIBERO objects, an
+object coloured like the robot) the points are tracked by LK as above. The occlusion rule: an object hidden
+(by the hand, or carried out of sight) is invisible, keeps its last position, and counts against the
+tracking-failure rule of `t4_score`.
 """
 
 from __future__ import annotations
@@ -55,6 +68,19 @@ TRACKED_RATIO = 0.5  # a generated rollout whose object is visible in fewer than
 ARM_GRID_STEP = 4  # px: spacing of the distal-arm seed grid
 ARM_ERODE = 2  # px: the distal-arm mask is eroded by this before seeding (no points on its outline)
 DISTAL_LABEL = 2  # robot mask label of wrist, hand and fingers
+COLOUR_DELTA_E = 22.0  # CIE76 ΔE in Lab within which a pixel has the object's colour (a blue cube against the
+#   wood is ≥ 60 away; a generated video's colour drift of a few units stays inside)
+COLOUR_PATCH = 2  # px: the object's colour is the median over a (2·2+1)² patch at its frame-0 position
+REGION_RADIUS_MAX = 24.0  # px: the frame-0 region of the object's colour must lie within this of its position,
+#   else the colour leaks into the surroundings and is not distinct (LK instead)
+REGION_AREA_MIN = 4  # px²: a smaller frame-0 region is noise, not an object (LK instead)
+ROBOT_COLOUR_MAX = 0.02  # the object's colour may cover at most this fraction of the robot's frame-0 pixels,
+#   so that the region cannot follow the gripper (LK instead)
+REGION_PART_MIN = 0.05  # a region smaller than this fraction of the frame-0 area (or than 2 px²) is not the
+#   object: a grasped cube shows a sliver of colour between the fingers, which is kept
+REGION_SEARCH = 48  # px: half-side of the window searched around the last position
+REGION_JUMP_MAX = 40.0  # px: the object's region moves at most this far from its last position (measured on
+#   353 validation references and rollouts: true motion ≤ 17 px per frame, drops included)
 
 _LK = dict(winSize=(LK_WINDOW, LK_WINDOW), criteria=LK_CRITERIA)
 
@@ -73,6 +99,26 @@ def scoring_frames(frames: np.ndarray) -> np.ndarray:
         out[t] = cv2.resize(grey, (SCORING_SIZE, SCORING_SIZE),
                             interpolation=cv2.INTER_AREA if shrink else cv2.INTER_LINEAR)
     return out
+
+
+@dataclass
+class ScoringVideo:
+    """A video in the scoring frame: grey (T, 256, 256) uint8 for LK, and RGB (T, 256, 256, 3) uint8 for the
+    colour-region stage (None for a grey input)."""
+
+    grey: np.ndarray
+    rgb: np.ndarray | None
+
+
+def scoring_video(frames: np.ndarray) -> ScoringVideo:
+    """(T, H, W, 3) RGB or (T, H, W) grey uint8 video → `ScoringVideo` (resized as `scoring_frames`)."""
+    grey = scoring_frames(frames)
+    frames = np.asarray(frames)
+    if frames.ndim != 4:
+        return ScoringVideo(grey, None)
+    size = (SCORING_SIZE, SCORING_SIZE)
+    interp = cv2.INTER_AREA if max(frames.shape[1:3]) > SCORING_SIZE else cv2.INTER_LINEAR
+    return ScoringVideo(grey, np.stack([cv2.resize(f, size, interpolation=interp) for f in frames]))
 
 
 def scoring_mask(mask: np.ndarray) -> np.ndarray:
@@ -189,30 +235,114 @@ def centroid_path(tracks: Tracks, *, anchored: bool) -> np.ndarray:
     return out
 
 
+TrackFn = Callable[..., "Tracks"]  # (video, points, *, anchored) -> Tracks: `track` or a backend's
+
+
+@dataclass
+class ColourModel:
+    """The evaluated object's colour (Lab, float) and its frame-0 region: area (px²) and centroid (x, y)."""
+
+    lab: np.ndarray
+    area: int
+    centre: np.ndarray
+
+
+def _lab(rgb: np.ndarray) -> np.ndarray:
+    return cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+
+
+def _colour_mask(rgb: np.ndarray, lab: np.ndarray) -> np.ndarray:
+    return (np.linalg.norm(_lab(rgb) - lab, axis=-1) < COLOUR_DELTA_E).astype(np.uint8)
+
+
+def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray) -> ColourModel | None:
+    """The object's colour model from frame 0 (RGB, scoring frame), or None when its colour is not distinct:
+    the region of that colour around `object_px` is tiny or leaks beyond `REGION_RADIUS_MAX`, or the colour
+    covers more than `ROBOT_COLOUR_MAX` of the robot (`robot_mask0`, any size, labels > 0)."""
+    x, y = (int(round(v)) for v in object_px)
+    k = COLOUR_PATCH
+    if not (k <= x < SCORING_SIZE - k and k <= y < SCORING_SIZE - k):
+        return None
+    lab = np.median(_lab(rgb0[y - k:y + k + 1, x - k:x + k + 1]).reshape(-1, 3), axis=0)
+    match = _colour_mask(rgb0, lab)
+    _, labels = cv2.connectedComponents(match, connectivity=8)
+    ids = labels[y - k:y + k + 1, x - k:x + k + 1].ravel()
+    if not (ids > 0).any():
+        return None
+    ys, xs = np.nonzero(labels == np.bincount(ids[ids > 0]).argmax())
+    if len(xs) < REGION_AREA_MIN or np.hypot(xs - object_px[0], ys - object_px[1]).max() > REGION_RADIUS_MAX:
+        return None
+    robot = scoring_mask(robot_mask0) > 0
+    if robot.any() and match[robot].mean() > ROBOT_COLOUR_MAX:
+        return None
+    return ColourModel(lab, len(xs), np.array([xs.mean(), ys.mean()]))
+
+
+def region_tracks(rgb: np.ndarray, points: np.ndarray, model: ColourModel) -> Tracks:
+    """The query points moved rigidly with the object's colour region through an RGB scoring-frame video: in
+    each frame the region of the object's colour nearest its last position (within `REGION_JUMP_MAX`, at least
+    `REGION_PART_MIN` of its frame-0 area); none: invisible, last position kept."""
+    points = np.asarray(points, np.float32).reshape(-1, 2)
+    T = len(rgb)
+    pos = np.repeat(points[None], T, axis=0)
+    vis = np.zeros((T, len(points)), bool)
+    vis[0] = True
+    last = model.centre.copy()
+    min_area = max(2.0, REGION_PART_MIN * model.area)
+    for t in range(1, T):
+        x0, y0 = (max(int(v) - REGION_SEARCH, 0) for v in last)
+        x1, y1 = (min(int(v) + REGION_SEARCH + 1, SCORING_SIZE) for v in last)
+        _, _, stats, centres = cv2.connectedComponentsWithStats(_colour_mask(rgb[t, y0:y1, x0:x1], model.lab),
+                                                                connectivity=8)
+        found = [c + (x0, y0) for c, a in zip(centres[1:], stats[1:, cv2.CC_STAT_AREA]) if a >= min_area]
+        dist = [float(np.linalg.norm(c - last)) for c in found]
+        if not dist or min(dist) > REGION_JUMP_MAX:
+            pos[t] = pos[t - 1]
+            continue
+        last = found[int(np.argmin(dist))]
+        pos[t] = points + (last - model.centre).astype(np.float32)
+        vis[t] = True
+    return Tracks(pos, vis)
+
+
+def object_tracks(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray | None = None
+                  ) -> Tracks:
+    """The default tracker on the evaluated object: the 3×3 grid around `object_px` by its colour region when
+    the colour is distinct (`colour_model`; needs an RGB video and the reference's frame-0 robot mask), else
+    by anchored LK on the grey video."""
+    grid = query_grid(object_px)
+    if isinstance(video, ScoringVideo):
+        if video.rgb is not None and robot_mask0 is not None:
+            model = colour_model(video.rgb[0], object_px, robot_mask0)
+            if model is not None:
+                return region_tracks(video.rgb, grid, model)
+        video = video.grey
+    return track(video, grid, anchored=True)
+
+
+def object_path(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray | None = None,
+                tracker=None) -> tuple[Tracks, np.ndarray]:
+    """The evaluated object's tracks (`object_tracks`, or a backend's `track_object`) and its centroid path
+    (T, 2)."""
+    tracks = (tracker.track_object(video, object_px, robot_mask0) if tracker
+              else object_tracks(video, object_px, robot_mask0))
+    return tracks, centroid_path(tracks, anchored=True)
+
+
 @dataclass
 class ObjectMotion:
     """The evaluated object's track: d (px), the visible fraction of frames (≥ 1 visible point), and the
-    number of textured query points at frame 0."""
+    number of textured query points at frame 0 (all 9 when the colour region tracks it)."""
 
     displacement: float
     visible_fraction: float
     textured_points: int
 
 
-TrackFn = Callable[..., "Tracks"]  # (video, points, *, anchored) -> Tracks: `track` or a backend's
-
-
-def object_path(grey: np.ndarray, object_px: np.ndarray, track_fn: TrackFn | None = None
-                ) -> tuple[Tracks, np.ndarray]:
-    """The 3×3 grid around `object_px` tracked (anchored) through a scoring-frame video, and its centroid path
-    (T, 2)."""
-    tracks = (track_fn or track)(grey, query_grid(object_px), anchored=True)
-    return tracks, centroid_path(tracks, anchored=True)
-
-
-def object_motion(grey: np.ndarray, object_px: np.ndarray, track_fn: TrackFn | None = None) -> ObjectMotion:
-    """d = max over frames of ‖centroid_t − centroid_0‖ for the 3×3 grid around `object_px` (anchored)."""
-    tracks, c = object_path(grey, object_px, track_fn)
+def object_motion(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray | None = None,
+                  tracker=None) -> ObjectMotion:
+    """d = max over frames of ‖centroid_t − centroid_0‖ for the evaluated object (`object_path`)."""
+    tracks, c = object_path(video, object_px, robot_mask0, tracker)
     d = float(np.linalg.norm(c - c[0], axis=1).max())
     return ObjectMotion(d, float(tracks.visible.any(axis=1).mean()), int(tracks.visible[0].sum()))
 
@@ -222,14 +352,17 @@ def gate_frames(num_frames: int) -> tuple[int, int, int]:
     return 0, (num_frames - 1) // 2, num_frames - 1
 
 
-def motion_gate(grey: np.ndarray, reference_mask0: np.ndarray, track_fn: TrackFn | None = None) -> float:
+def motion_gate(video: ScoringVideo | np.ndarray, reference_mask0: np.ndarray, track_fn: TrackFn | None = None
+                ) -> float:
     """g = max pairwise distance, over the gate frames, of the distal-arm centroid tracked (chained) from a
     grid seeded at frame 0 on the reference mask's label 2. No seed point or no texture: g = 0."""
     seeds = arm_grid(reference_mask0)
-    tracks = (track_fn or track)(grey, seeds, anchored=False)
+    if track_fn is None:
+        video = video.grey if isinstance(video, ScoringVideo) else video
+    tracks = (track_fn or track)(video, seeds, anchored=False)
     if not tracks.visible[0].any():
         return 0.0
-    c = centroid_path(tracks, anchored=False)[list(gate_frames(len(grey)))]
+    c = centroid_path(tracks, anchored=False)[list(gate_frames(len(tracks.positions)))]
     return float(max(np.linalg.norm(c[i] - c[j]) for i in range(3) for j in range(i + 1, 3)))
 
 
@@ -250,15 +383,14 @@ def t4_score(frames: np.ndarray, object_px: np.ndarray, reference_mask0: np.ndar
     """S = 100·1[g ≥ GATE_RATIO·g_ref]·1[tracked]·1[d ≤ MOTION_MAX] for one video (any size; resized to 256²).
     `object_px`: the evaluated object's frame-0 position in the scoring frame; `reference_mask0`: the
     reference robot label mask at frame 0; `gate_reference`: g of the reference (stored per instance);
-    `visible_reference`: the fraction of reference frames in which the object is visible (stored per instance;
-    None skips the tracking-failure rule, as the builder does on the reference itself); `tracker`: a tracker
-    backend (`wsp_eval.backends.tracker`; default this module's Lucas–Kanade)."""
+    `visible_reference`: the fraction of reference frames in which the same tracker sees the object (None
+    skips the tracking-failure rule, as the builder does on the reference itself); `tracker`: a tracker
+    backend (`wsp_eval.backends.tracker`; default this module's colour region + Lucas–Kanade)."""
     if not gate_reference > 0:
         raise ValueError(f"gate_reference must be positive, got {gate_reference}")
-    video = tracker.prepare(frames) if tracker else scoring_frames(frames)
-    fn = tracker.track if tracker else track
-    motion = object_motion(video, object_px, fn)
-    g = motion_gate(video, reference_mask0, fn)
+    video = tracker.prepare(frames) if tracker else scoring_video(frames)
+    motion = object_motion(video, object_px, reference_mask0, tracker)
+    g = motion_gate(video, reference_mask0, tracker.track if tracker else None)
     passed = g >= GATE_RATIO * gate_reference
     tracked = visible_reference is None or motion.visible_fraction >= TRACKED_RATIO * visible_reference
     ok = passed and tracked and motion.displacement <= MOTION_MAX

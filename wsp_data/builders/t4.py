@@ -31,7 +31,7 @@ from wsp_data.schema import IMAGE_SIZE, SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
     GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, motion_gate, object_motion, project,
-    scoring_frames, scoring_mask, t4_score,
+    scoring_mask, scoring_video, t4_score,
 )
 
 KINDS = ("distractor", "false_contact", "spatial_proximity")
@@ -194,11 +194,11 @@ class T4Builder(SuiteBuilder):
         k = proposal.index
         pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic, IMAGE_SIZE)
         rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
-        grey = scoring_frames(rgb)
-        gate = motion_gate(grey, mask0)
+        video = scoring_video(rgb)
+        gate = motion_gate(video, mask0)
         if gate < GATE_MIN_REFERENCE:
             return Dropped("gate_too_small", rendered, simulated, {"gate": gate})
-        motion = object_motion(grey, pixel)
+        motion = object_motion(video, pixel, mask0)
         if motion.textured_points < MIN_TEXTURED or motion.visible_fraction < MIN_VISIBLE:
             return Dropped("object_untrackable", rendered, simulated,
                            {"textured": motion.textured_points, "visible": motion.visible_fraction})

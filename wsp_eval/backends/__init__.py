@@ -3,7 +3,8 @@ entry is a factory `(BackendSpec) -> backend`; other distributions add some thro
 `worldsimprobe.flow`, `worldsimprobe.tracker` and `worldsimprobe.judge` (`wsp_eval.registry`).
 
     flow      dis (default, OpenCV DIS)        dpflow (ptlflow, local checkpoint)
-    tracker   lk (default, OpenCV LK + FB)     tapnext (tapnet, local checkpoint)
+    tracker   lk (default, colour region +     tapnext (tapnet, local checkpoint)
+              OpenCV LK + FB)
     judge     net (default, learned, ONNX on    rules (deterministic hand rules, the former default)
               OpenCV dnn; weights packaged)   openai (any OpenAI-compatible VLM endpoint, e.g. Qwen3-VL)
 

@@ -1,7 +1,8 @@
-"""Point-tracker backends for T4 (SPEC §4): pyramidal Lucas–Kanade with a forward–backward check
-(default, CPU, no weights; `wsp_eval.tracking`) and TAPNext through DeepMind's `tapnet` package with a
-local checkpoint (optional). A backend prepares a video for tracking (`prepare`) and tracks query points
-from frame 0 (`track`), returning `wsp_eval.tracking.Tracks` in the 256×256 scoring frame."""
+"""Point-tracker backends for T4 (SPEC §4): colour region + pyramidal Lucas–Kanade with a forward–backward
+check (default, CPU, no weights; `wsp_eval.tracking`) and TAPNext through DeepMind's `tapnet` package with a
+local checkpoint (optional). A backend prepares a video for tracking (`prepare`), tracks query points from
+frame 0 (`track`) and the evaluated object's query grid (`track_object`), returning `wsp_eval.tracking.Tracks`
+in the 256×256 scoring frame."""
 
 from __future__ import annotations
 
@@ -15,20 +16,27 @@ from wsp_eval.backends.errors import BackendUnavailable, local_checkpoint
 
 
 class LKTracker:
-    """OpenCV pyramidal Lucas–Kanade with forward–backward check (the default backend)."""
+    """The evaluated object by its colour region where its colour is distinct, else OpenCV pyramidal
+    Lucas–Kanade with forward–backward check; the arm by LK (the default backend, `wsp_eval.tracking`)."""
 
     name = "lk"
 
     def __init__(self):
-        self.version = f"opencv {cv2.__version__} pyramidal LK + forward-backward check"
+        self.version = (f"opencv {cv2.__version__} colour region (ΔE {tracking.COLOUR_DELTA_E:g}) + pyramidal LK "
+                        "with forward-backward check")
 
     @staticmethod
-    def prepare(frames: np.ndarray) -> np.ndarray:
-        return tracking.scoring_frames(frames)
+    def prepare(frames: np.ndarray) -> tracking.ScoringVideo:
+        return tracking.scoring_video(frames)
 
     @staticmethod
-    def track(video: np.ndarray, points: np.ndarray, *, anchored: bool) -> tracking.Tracks:
-        return tracking.track(video, points, anchored=anchored)
+    def track(video: tracking.ScoringVideo, points: np.ndarray, *, anchored: bool) -> tracking.Tracks:
+        return tracking.track(video.grey, points, anchored=anchored)
+
+    @staticmethod
+    def track_object(video: tracking.ScoringVideo, object_px: np.ndarray, robot_mask0: np.ndarray | None
+                     ) -> tracking.Tracks:
+        return tracking.object_tracks(video, object_px, robot_mask0)
 
 
 class TAPNextTracker:
@@ -61,6 +69,10 @@ class TAPNextTracker:
     def prepare(frames: np.ndarray) -> np.ndarray:
         size = (tracking.SCORING_SIZE, tracking.SCORING_SIZE)
         return np.stack([cv2.resize(f, size, interpolation=cv2.INTER_LINEAR) for f in np.asarray(frames)])
+
+    def track_object(self, video: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray | None
+                     ) -> tracking.Tracks:
+        return self.track(video, tracking.query_grid(object_px), anchored=True)
 
     def track(self, video: np.ndarray, points: np.ndarray, *, anchored: bool) -> tracking.Tracks:
         torch = self._torch

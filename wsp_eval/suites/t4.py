@@ -1,12 +1,12 @@
 """T4 Interaction grounding (SPEC §3 T4): track the evaluated object and the distal arm through the generated
 video (`wsp_eval.tracking`, tracker backend); S = 100·1[g ≥ 0.5·g_ref]·1[tracked]·1[d ≤ 10 px] (tracked: the
-object is visible in at least half as many frames as in the reference); report by kind."""
+object is visible in at least half as many frames as the same tracker sees it in the reference); report by kind."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.tracking import t4_score
+from wsp_eval.tracking import object_motion, scoring_video, t4_score
 
 SUITE, TITLE = "t4", "Interaction grounding"
 ROLES = ("reference",)
@@ -15,9 +15,14 @@ GROUP_BY, BALANCED = "kind", False
 
 
 def prepare(ref, backends) -> dict:
-    return {"object_px": np.asarray(ref.row["object_pixel_256"], np.float64), "mask0": ref.masks("reference")[0],
-            "gate_reference": float(ref.row["gate_reference"]),
-            "visible_reference": float(ref.row["object_visible_fraction"])}
+    """The instance's query point, frame-0 mask and gate; the object's visible fraction in the reference is
+    measured here with the scoring tracker (not read from the release), so that the tracking-failure rule
+    compares like with like whichever tracker scores and whichever tracker version built the release."""
+    object_px, mask0 = np.asarray(ref.row["object_pixel_256"], np.float64), ref.masks("reference")[0]
+    tracker = backends.tracker
+    video = tracker.prepare(ref.frames("reference")) if tracker else scoring_video(ref.frames("reference"))
+    return {"object_px": object_px, "mask0": mask0, "gate_reference": float(ref.row["gate_reference"]),
+            "visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
