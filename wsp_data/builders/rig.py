@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
@@ -41,16 +42,28 @@ R = TypeVar("R")
 
 class RigCache(Generic[R]):
     """Rigs (`TaskRig` or a suite's own) keyed by their factory's arguments (a task, or a task and a prop),
-    created on first use and kept for the life of the worker."""
+    created on first use and kept for the life of the worker — at most `capacity` of them (the platform's
+    `rigs_per_worker`; None: all), the least recently used closed first. A bounded cache is for builders that
+    hold one rig per attempt: a rig fetched earlier in the same attempt could otherwise be closed under them.
+    Rigs carry no state between attempts (every replay resets from its seed), so a rig created anew gives the
+    same rollouts as the one it replaces."""
 
-    def __init__(self, factory: Callable[..., R] = TaskRig):
+    def __init__(self, factory: Callable[..., R] = TaskRig, capacity: int | None = None):
+        if capacity is not None and capacity < 1:
+            raise ValueError(f"a rig cache holds at least one rig, got capacity {capacity}")
         self._factory = factory
-        self._rigs: dict[tuple, R] = {}
+        self._capacity = capacity
+        self._rigs: OrderedDict[tuple, R] = OrderedDict()
 
     def __call__(self, *key) -> R:
-        if key not in self._rigs:
-            self._rigs[key] = self._factory(*key)
-        return self._rigs[key]
+        if key in self._rigs:
+            self._rigs.move_to_end(key)
+            return self._rigs[key]
+        while self._capacity is not None and len(self._rigs) >= self._capacity:
+            _, oldest = self._rigs.popitem(last=False)
+            oldest.close()
+        self._rigs[key] = rig = self._factory(*key)
+        return rig
 
     def close(self) -> None:
         for rig in self._rigs.values():

@@ -35,7 +35,7 @@ class T1Builder(SuiteBuilder):
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.rig = RigCache(lambda task: TaskRig(task, config.platform))
+        self.rig = RigCache(lambda task: TaskRig(task, config.platform), self.kit.rigs_per_worker)
 
     def close(self) -> None:
         self.rig.close()

@@ -154,6 +154,7 @@ class T2Builder(SuiteBuilder):
         if MAX_ATTEMPTS * config.count > DONOR_SEED_OFFSET:
             raise ValueError(f"T2 supports at most {DONOR_SEED_OFFSET // MAX_ATTEMPTS} instances per config: receiver "
                              f"scene seeds must stay below the donor seeds (offset {DONOR_SEED_OFFSET})")
+        # unbounded: an attempt holds the receiver while it reads every task's typical stream for its donors
         self.rig = RigCache(lambda task: _TaskRig(task, config.platform))
 
     def close(self) -> None:

@@ -85,7 +85,7 @@ class T3Builder(SuiteBuilder):
         self.tasks = tuple(t for t in dict.fromkeys(config.tasks) if t in known)
         if not self.tasks:
             raise ValueError(f"T3 runs on {', '.join(known)} (trained policies and operator models); none selected")
-        self.rig = RigCache(lambda task: _Rig(task, config.platform))
+        self.rig = RigCache(lambda task: _Rig(task, config.platform), self.kit.rigs_per_worker)
         self._groups: dict[tuple[str, int], dict | str] = {}
 
     def close(self) -> None:

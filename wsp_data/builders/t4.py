@@ -143,7 +143,7 @@ class T4Builder(SuiteBuilder):
         if missing:
             raise ValueError(f"t4: no selected task serves kind(s) {', '.join(missing)}; "
                              f"needs {self.kit.t4_needs(missing)}")
-        self.rig = RigCache(self.kit.t4_rig)
+        self.rig = RigCache(self.kit.t4_rig, self.kit.rigs_per_worker)
 
     def plan(self, slot: int) -> SlotPlan:
         kind = KINDS[slot % len(KINDS)]

@@ -73,7 +73,7 @@ class T5Builder(SuiteBuilder):
         super().__init__(config)
         self.primitives = self.kit.t5_primitives()
         self.primitive_tasks = self.kit.t5_primitive_tasks(config.tasks)
-        self.rig = RigCache(self.kit.t5_rig)
+        self.rig = RigCache(self.kit.t5_rig, self.kit.rigs_per_worker)
         self.thresholds = self.kit.t5_rule_thresholds()
         missing = [p for p in self.primitives if not self.primitive_tasks[p]]
         if missing:

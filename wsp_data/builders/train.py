@@ -25,7 +25,7 @@ class TrainBuilder(SuiteBuilder):
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.rig = RigCache(lambda task: TaskRig(task, config.platform))
+        self.rig = RigCache(lambda task: TaskRig(task, config.platform), self.kit.rigs_per_worker)
 
     def close(self) -> None:
         self.rig.close()

@@ -19,8 +19,9 @@ Hooks are grouped by the suites that call them:
 
 Every hook documents what it returns (Returns), the units (Units, where numbers are physical) and when a
 builder calls it (Called). Hooks that create simulators are called once per task (or task and scene) per
-build worker and their results are kept for the worker's life (`wsp_data.builders.rig.RigCache`); the rest
-are cheap and may be called per attempt.
+build worker and their results are kept for the worker's life, or up to `rigs_per_worker` of them where a
+platform's simulators are too large to keep one per task (`wsp_data.builders.rig.RigCache`); the rest are cheap
+and may be called per attempt.
 
 Determinism: a build is byte-identical for equal build configs. A hook must therefore depend only on its
 arguments (and on the seeds it is given): no wall clock, no global random state, the same order of random
@@ -140,6 +141,8 @@ class PlatformKit(ABC):
     action_bounds: ClassVar[tuple[float, float] | None] = None
     gripper_dim: ClassVar[int]
     gripper_open: ClassVar[float]
+    rigs_per_worker: ClassVar[int | None] = None  # task rigs (simulators) a build worker keeps alive at once,
+    #   least recently used closed first; None: every task's (`wsp_data.builders.rig.RigCache`)
 
     # -- support -----------------------------------------------------------------------------------------
     def unsupported(self, suite: str) -> str | None:

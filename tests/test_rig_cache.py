@@ -1,0 +1,54 @@
+"""The builders' rig cache (wsp_data.builders.rig.RigCache): bounded per platform (`rigs_per_worker`), least
+recently used closed first. The factory here is a plain recorder: the cache's own logic is under test (the
+simulator side — a build whose rigs are closed mid-way gives the same release — is the byte-identical LIBERO
+rebuild with `rigs_per_worker` = 1 in test_libero_release.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from wsp_data.builders.rig import RigCache
+from wsp_data.platforms import kit
+
+
+class Recorder:
+    made: list[tuple] = []
+
+    def __init__(self, *key):
+        self.key, self.closed = key, False
+        Recorder.made.append(key)
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_unbounded_cache_keeps_every_rig():
+    Recorder.made = []
+    cache = RigCache(Recorder)
+    rigs = [cache(t) for t in ("a", "b", "c", "a", "b")]
+    assert Recorder.made == [("a",), ("b",), ("c",)] and rigs[0] is rigs[3] and not any(r.closed for r in rigs)
+    cache.close()
+    assert all(r.closed for r in rigs)
+
+
+def test_bounded_cache_closes_the_least_recently_used():
+    Recorder.made = []
+    cache = RigCache(Recorder, capacity=2)
+    a, b = cache("a"), cache("b")
+    assert cache("a") is a  # a is now the most recent
+    c = cache("c")  # evicts b, not a
+    assert b.closed and not a.closed and not c.closed
+    b2 = cache("b")  # recreated; evicts a
+    assert b2 is not b and a.closed and Recorder.made == [("a",), ("b",), ("c",), ("b",)]
+    cache.close()
+    assert c.closed and b2.closed
+
+
+def test_capacity_must_hold_a_rig():
+    with pytest.raises(ValueError, match="at least one rig"):
+        RigCache(Recorder, capacity=0)
+
+
+def test_platform_bounds():
+    """LIBERO's rigs (1–2 GB each) are bounded; ManiSkill's are kept per task."""
+    assert kit("libero").rigs_per_worker == 2 and kit("maniskill").rigs_per_worker is None
