@@ -1,7 +1,7 @@
 """The oracle under common video encodings: what `wsp validate` says of each, and what each would score if it
 were accepted (`wsp score --accept-lossy`), per config, beside the lossless oracle (docs/validity.md).
 
-    .venv/bin/python benchmarks/encoding_study.py RELEASE --out DIR [--workers 2]
+    .venv/bin/python benchmarks/encoding_study.py RELEASE --out DIR [--workers 2] [--only TEXT ...]
 
 Writes the oracle baseline (seed 0) once, re-encodes every video of it per encoding in ENCODINGS (PyAV, the
 frames decoded from the lossless oracle, scaled with area/bicubic resampling where the encoding changes the
@@ -47,6 +47,8 @@ ENCODINGS = (
     Encoding("h264 yuv420p crf 18", "libx264", "yuv420p", {"crf": "18"}),
     Encoding("h264 yuv420p crf 23, 256×256", "libx264", "yuv420p", {"crf": "23"}, 256),
     Encoding("h264 yuv420p crf 28, 128×128", "libx264", "yuv420p", {"crf": "28"}, 128),
+    Encoding("h264 RGB crf 0, 192×192", "libx264rgb", "rgb24", {"crf": "0"}, 192),
+    Encoding("h264 RGB crf 0, 96×96", "libx264rgb", "rgb24", {"crf": "0"}, 96),
 )
 
 
@@ -89,11 +91,15 @@ def main() -> None:
     ap.add_argument("release", type=Path)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--only", nargs="+", default=(), help="encodings whose name contains one of these (the first "
+                    "encoding, the lossless baseline, is always kept)")
     args = ap.parse_args()
     oracle = args.out / "oracle"
     write_baseline("oracle", args.release, oracle, seeds=(0,), progress=True)
     rows = []
     for i, enc in enumerate(ENCODINGS):
+        if i and args.only and not any(t in enc.name for t in args.only):
+            continue
         sub = args.out / f"enc{i}"
         reencode(oracle, sub, enc)
         problems = validate(sub, args.release)
