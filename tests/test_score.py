@@ -19,7 +19,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from wsp_eval.baselines import write_baseline
-from wsp_eval.score import BOOTSTRAP, CACHE, ScoreError, aggregate, score_submission
+from wsp_eval.score import (BOOTSTRAP, CACHE, CACHE_KEY, SCORING_VERSION, ScoreError, aggregate,
+                            score_submission)
 
 
 def _sub(release, tmp_path_factory, name: str):
@@ -118,6 +119,13 @@ def test_resume_uses_the_cache_and_workers_agree(suites_scores, suites_release, 
     assert resumed["timing"]["instances"] == len(lines) - len(kept)
     scores = {(r["config"], r["instance_id"]): r["score"] for r in resumed["instances"]}
     assert scores[(kept[0]["config"], kept[0]["instance_id"])] == -1.0
+    # a cache written by an older scoring version (other metrics) is discarded, never reused
+    key = json.loads((first / CACHE_KEY).read_text())
+    assert key["scoring_version"] == SCORING_VERSION == resumed["scoring_version"]
+    (first / CACHE_KEY).write_text(json.dumps({**key, "scoring_version": SCORING_VERSION - 1}))
+    rescored = score_submission(sub, suites_release, first, progress=False)
+    assert rescored["timing"]["instances"] == len(lines)
+    assert -1.0 not in [r["score"] for r in rescored["instances"]]  # the marked record was not reused
 
 
 # -- aggregation on hand-built records -------------------------------------------------------------------------

@@ -15,7 +15,7 @@
   `accept_lossy` scores it anyway, and the report says the encoding check was off (such scores are not
   comparable with others: codec noise lowers T1 most).
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
-  submission, release and backends skips them (another key clears the cache).
+  submission, release, backends and `SCORING_VERSION` skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
   single-threaded); or, with `executor="ray"`, as Ray tasks on a cluster (`wsp_eval.ray_tasks`; identical scores).
   Tasks carry paths, not videos: every node reads the release, the submission and the reference-flow cache at
@@ -47,6 +47,8 @@ from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
+SCORING_VERSION = 2  # what the scores mean, in the report and the resume cache's key (a cache of an older version
+#   is discarded): bump it with every metric change. 2: T4's colour-region object tracker (docs/validity.md §2)
 BOOTSTRAP = 1000  # resamples for the 95% CIs
 COPY_MAD = 0.5  # grey levels: a video closer than this to its reference (mean absolute difference) equals it
 COPY_SHARE = 0.9  # a submission whose videos equal their references this often is flagged as a probable copy
@@ -168,7 +170,7 @@ def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list
     manifest = (submission / SUBMISSION_JSON).read_bytes()
     rel = (release / "release.json").read_bytes()
     key = {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
-           "backends": spec.to_json(), "configs": configs}
+           "backends": spec.to_json(), "configs": configs, "scoring_version": SCORING_VERSION}
     return {**key, "accept_lossy": True} if accept_lossy else key
 
 
@@ -373,4 +375,5 @@ def aggregate(records: list[dict], rows: dict[str, list[dict]], configs: list[st
     macro = {"score": float(np.mean([platforms[p]["overall"]["score"] for p in names])) if names else None,
              "ci": _ci(np.mean([np.mean(list(samples[p].values()), axis=0) for p in names], axis=0)) if names else None,
              "platforms": names}
-    return {"wsp_report_version": REPORT_VERSION, "platforms": platforms, "macro_average": macro}
+    return {"wsp_report_version": REPORT_VERSION, "scoring_version": SCORING_VERSION, "platforms": platforms,
+            "macro_average": macro}
