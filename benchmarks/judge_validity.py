@@ -120,12 +120,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("releases", type=Path, nargs="+")
     ap.add_argument("--judge", nargs="+", default=["net"])
+    ap.add_argument("--checkpoint", type=Path, help="the `net` judge's weights (default: the shipped ones)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
     cv2.setNumThreads(1)
     result = {}
     for name in args.judge:
-        judge = make(BackendSpec(judge=name), ("judge",)).judge
+        judge = make(BackendSpec(judge=name, judge_checkpoint=str(args.checkpoint) if args.checkpoint else None),
+                     ("judge",)).judge
         records: dict[str, list[dict]] = defaultdict(list)
         for release in args.releases:
             for platform, recs in judge_release(release, judge).items():

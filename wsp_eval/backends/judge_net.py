@@ -29,7 +29,7 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "1"
+NAME, VERSION = "net", "2"
 WEIGHTS = Path(__file__).with_name("weights") / f"judge_net_v{VERSION}.onnx"
 FRAME, SIDE = 128, 64
 VIEWS = 3
