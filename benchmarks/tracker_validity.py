@@ -34,10 +34,10 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.reference import episodes, reference_frames
-from wsp_eval.release_format import IMAGE_SIZE, INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON
+from wsp_eval.release_format import INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON
 from wsp_eval.suites.reference import InstanceReference
-from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, colour_model, motion_gate, object_path,
-                               project, scoring_video, t4_score)
+from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, colour_model, frame_size, motion_gate,
+                               object_path, project, scoring_video, t4_score)
 
 POSES = OBJECT_POSES_KEY
 IN_VIEW_MARGIN = 12  # px: another object counts when its frame-0 position is this far inside the frame
@@ -70,8 +70,8 @@ def measure(config_dir: Path, row: dict, evaluated: int, role: str = "reference"
         if not np.linalg.norm(poses[0, 3:]) > 0:  # an unused slot (all zeros): no such object in this rollout
             continue
         try:
-            truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"], IMAGE_SIZE)
-                              for p in poses])
+            truth = np.stack([project(p[:3], row["camera_intrinsic"], row["camera_extrinsic"],
+                                      frame_size(frames[0])) for p in poses])
         except ValueError:  # behind the camera
             continue
         if k != evaluated and not ((truth[0] >= IN_VIEW_MARGIN) & (truth[0] <= 255 - IN_VIEW_MARGIN)).all():

@@ -81,6 +81,24 @@ def test_projection_into_the_scoring_frame():
         tr.project([0, 0, -1.0], K, E, 128)
 
 
+def test_projection_of_a_non_square_camera_matches_the_resize_into_the_scoring_frame():
+    """A 320×240 camera (f = 200 px, centre (159.5, 119.5)): each axis scales as `cv2.resize` scales it into the
+    256² frame (x by 0.8, y by 16/15), so a white pixel drawn where a point projects lands, after
+    `scoring_frames`, where `project` puts it (within the half-pixel blur of area interpolation)."""
+    K = np.array([[200, 0, 159.5], [0, 200, 119.5], [0, 0, 1]], float)
+    E = np.hstack([np.eye(3), np.zeros((3, 1))])
+    point = [0.25, -0.1, 1.0]  # → u = 209.5, v = 99.5 in the 320×240 image
+    expected = [(209.5 + 0.5) * 0.8 - 0.5, (99.5 + 0.5) * 16 / 15 - 0.5]
+    assert tr.project(point, K, E, (320, 240)) == pytest.approx(expected)
+    frame = np.zeros((240, 320), np.uint8)
+    frame[97:103, 207:213] = 255  # a 6 px square around (209.5, 99.5)
+    assert tr.frame_size(frame) == (320, 240)
+    grey = tr.scoring_frames(frame[None])[0].astype(float)
+    ys, xs = np.mgrid[:256, :256]
+    centre = [(xs * grey).sum() / grey.sum(), (ys * grey).sum() / grey.sum()]
+    assert centre == pytest.approx(tr.project(point, K, E, tr.frame_size(frame)), abs=0.5)
+
+
 def test_query_grid_is_3x3_within_the_radius():
     g = tr.query_grid(np.array([100.0, 50.0]))
     assert g.shape == (9, 2)

@@ -129,14 +129,22 @@ def scoring_mask(mask: np.ndarray) -> np.ndarray:
     return cv2.resize(mask.astype(np.uint8), (SCORING_SIZE, SCORING_SIZE), interpolation=cv2.INTER_NEAREST)
 
 
-def project(world_xyz: np.ndarray, intrinsic: np.ndarray, extrinsic: np.ndarray, image_size: int) -> np.ndarray:
+def project(world_xyz: np.ndarray, intrinsic: np.ndarray, extrinsic: np.ndarray,
+            image_size: int | tuple[int, int]) -> np.ndarray:
     """A world point → (x, y) in the scoring frame, through OpenCV intrinsics (3×3) and world→camera
-    extrinsics (3×4) of a square `image_size` camera. Raises if the point is behind the camera."""
+    extrinsics (3×4) of a camera whose images are `image_size` = (width, height) px (an int: square). Each axis
+    is scaled as `cv2.resize` scales it into the 256×256 frame. Raises if the point is behind the camera."""
     cam = np.asarray(extrinsic, np.float64).reshape(3, 4) @ np.append(np.asarray(world_xyz, np.float64)[:3], 1.0)
     if cam[2] <= 0:
         raise ValueError(f"point {world_xyz} is behind the camera (depth {cam[2]:.3f} m)")
     uv = (np.asarray(intrinsic, np.float64).reshape(3, 3) @ cam)[:2] / cam[2]
-    return (uv + 0.5) * (SCORING_SIZE / image_size) - 0.5
+    size = np.broadcast_to(np.asarray(image_size, np.float64), (2,))
+    return (uv + 0.5) * (SCORING_SIZE / size) - 0.5
+
+
+def frame_size(frame: np.ndarray) -> tuple[int, int]:
+    """(width, height) of an (H, W[, C]) image: the `image_size` its camera's points project with."""
+    return int(frame.shape[1]), int(frame.shape[0])
 
 
 def query_grid(center: np.ndarray, radius: float = QUERY_RADIUS) -> np.ndarray:

@@ -27,11 +27,11 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
-from wsp_data.schema import IMAGE_SIZE, SOURCE_ROLE
+from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
-    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, motion_gate, object_motion, project,
-    scoring_mask, scoring_video, t4_score,
+    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, frame_size, motion_gate, object_motion,
+    project, scoring_mask, scoring_video, t4_score,
 )
 
 KINDS = ("distractor", "false_contact", "spatial_proximity")
@@ -110,13 +110,13 @@ class Sight:
     of the robot's silhouette (the frame every model shares)."""
 
     def __init__(self, intrinsic: np.ndarray, extrinsic: np.ndarray, robot_mask: np.ndarray):
-        self.intrinsic, self.extrinsic = intrinsic, extrinsic
+        self.intrinsic, self.extrinsic, self.size = intrinsic, extrinsic, frame_size(robot_mask)
         free = (scoring_mask(robot_mask) == 0).astype(np.uint8)
         self.clearance = cv2.distanceTransform(free, cv2.DIST_L2, 5)  # px to the nearest robot pixel
 
     def __call__(self, xyz: np.ndarray) -> bool:
         try:
-            x, y = project(xyz, self.intrinsic, self.extrinsic, IMAGE_SIZE)
+            x, y = project(xyz, self.intrinsic, self.extrinsic, self.size)
         except ValueError:
             return False
         inside = VIEW_MARGIN <= min(x, y) and max(x, y) <= SCORING_SIZE - 1 - VIEW_MARGIN
@@ -192,7 +192,8 @@ class T4Builder(SuiteBuilder):
         if (why := self.violation(rig, kind, proposal, ref)) is not None:
             return Dropped(why, rendered, simulated)
         k = proposal.index
-        pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic, IMAGE_SIZE)
+        pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic,
+                        frame_size(ref.observations[0].rgb))
         rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
         video = scoring_video(rgb)
         gate = motion_gate(video, mask0)

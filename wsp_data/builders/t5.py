@@ -22,9 +22,9 @@ import numpy as np
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
 from wsp_data.builders.t5_rules import MOTION_ONSET, check
-from wsp_data.schema import IMAGE_SIZE, SOURCE_ROLE
+from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
-from wsp_eval.tracking import project
+from wsp_eval.tracking import frame_size, project
 
 BACKOFF = 4  # steps (0.2 s) before first contact
 OTHER_OBJECT_MAX_SHIFT = 0.01  # m: any other object moving more is an unintended collision
@@ -121,8 +121,8 @@ class T5Builder(SuiteBuilder):
             "source": "scripted_expert+scripted_primitive", "primitive": primitive, "evaluated_object": evaluated,
             "evaluated_index": ev, "branch_step": b.branch, "first_contact_step": b.contact,
             "source_length": len(source), "robot_base_xy": base_xy,
-            "object_pixel_256": [float(x) for x in project(poses[0, ev, :3], rendered.intrinsic,
-                                                           rendered.extrinsic, IMAGE_SIZE)],
+            "object_pixel_256": [float(x) for x in project(poses[0, ev, :3], rendered.intrinsic, rendered.extrinsic,
+                                                           frame_size(rendered.observations[0].rgb))],
             **measured, "interventions": {"reference": parameters},
         }
         src = rig.render.replay(seed, source, placements)  # the unperturbed source: the expert, no primitive
