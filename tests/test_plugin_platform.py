@@ -189,6 +189,7 @@ class PlanarKit(PlatformKit):
     action_bounds = None
     gripper_dim = 2
     gripper_open = 1.0
+    default_counts = {"t1": 2}  # what `wsp build` builds when no --count is given
 
     def unsupported(self, suite: str) -> str | None:
         if suite == "t4":
@@ -236,13 +237,15 @@ def test_the_world_renders_frames_masks_and_a_small_joint_change(planar):
 
 
 def test_a_plugin_platform_builds_a_real_t1_config(planar, tmp_path):
-    from wsp_data.build import build
-    from wsp_data.builders import BuildConfig
+    import json
 
-    out = tmp_path / "worldsimprobe"
-    result = build(BuildConfig("t1", "planar", 2, ("PushBox",)), out, progress=False)
-    assert result.assembled
     import pyarrow.parquet as pq
+
+    from wsp_data.cli import main
+
+    out = tmp_path / "worldsimprobe"  # the CLI, no --count: the kit's default count
+    assert main(["build", "--platform", "planar", "--suite", "t1", "--out", str(out), "--quiet"]) == 0
+    assert json.loads((out / "release.json").read_text())["configs"]["t1_planar"]["build_config"]["count"] == 2
 
     rows = pq.read_table(out / "t1_planar" / "instances.parquet").to_pylist()
     assert len(rows) == 2 and {r["task"] for r in rows} == {"PushBox"}

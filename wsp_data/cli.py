@@ -28,12 +28,6 @@ from wsp_data.schema import DEFAULT_RELEASE_NAME, SEED_BASE, SUITES
 from wsp_eval import console
 from wsp_eval.registry import PluginError
 
-PAPER_COUNTS = {  # paper Table S3 (SPEC §3)
-    "maniskill": {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360},
-    "libero": {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000},
-}
-
-
 class CliError(Exception):
     pass
 
@@ -215,7 +209,7 @@ def cmd_build(args) -> int:
         listed = "\n  ".join(known)
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
     try:
-        count = args.count or PAPER_COUNTS.get(args.platform, {}).get(args.suite) or EPISODES_PER_TASK * len(tasks)
+        count = args.count or kit(args.platform).default_counts.get(args.suite) or EPISODES_PER_TASK * len(tasks)
         config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range)
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet, executor=args.executor, address=args.address)

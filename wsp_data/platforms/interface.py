@@ -141,6 +141,8 @@ class PlatformKit(ABC):
     action_bounds: ClassVar[tuple[float, float] | None] = None
     gripper_dim: ClassVar[int]
     gripper_open: ClassVar[float]
+    default_counts: ClassVar[dict[str, int]] = {}  # `wsp build`'s --count when none is given, per suite (the
+    #   paper's counts, SPEC §3); a suite without one defaults to 100 episodes per selected task
     rigs_per_worker: ClassVar[int | None] = None  # task rigs (simulators) a build worker keeps alive at once,
     #   least recently used closed first; None: every task's (`wsp_data.builders.rig.RigCache`)
 
