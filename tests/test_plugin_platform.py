@@ -216,6 +216,9 @@ class PlanarKit(PlatformKit):
     def blocked(self, qpos, tcp_pose, actions) -> bool:
         return joint_blocked(qpos, tcp_pose, self.joint_stream(Rollout("", 0, actions, actions)))
 
+    def render_check(self) -> np.ndarray:
+        return PlanarWorld(render=True).reset(0).rgb
+
 
 @pytest.fixture(scope="module")
 def planar():
@@ -234,6 +237,16 @@ def test_the_world_renders_frames_masks_and_a_small_joint_change(planar):
     assert mse > 0  # anti-aliased sub-pixel drawing sees a 0.0025 rad joint change
     ex = planar.make_expert("PushBox")
     assert sum(ex.trajectory(s) is not None for s in range(5)) >= 4
+
+
+def test_the_render_check_covers_a_plugin_platform_and_rejects_a_bad_frame(planar, monkeypatch, capsys):
+    from wsp_data.platforms import render_check
+
+    assert render_check.main(["planar"]) == 0
+    assert "render check: planar ok, frame (128, 128, 3)" in capsys.readouterr().out
+    monkeypatch.setattr(PlanarKit, "render_check", lambda self: np.zeros((128, 128, 3), np.uint8))
+    assert render_check.main(["planar"]) == 1
+    assert "planar: bad frame (128, 128, 3) uint8, max 0" in capsys.readouterr().err
 
 
 def test_a_plugin_platform_builds_a_real_t1_config(planar, tmp_path):

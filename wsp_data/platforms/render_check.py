@@ -1,40 +1,48 @@
-"""`python -m wsp_data.platforms.render_check`: render one frame of every built-in platform on the CPU (its kit's
-`render_check` hook: ManiSkill on SAPIEN, LIBERO on MuJoCo), or fail clearly."""
+"""`python -m wsp_data.platforms.render_check [PLATFORM ...]`: render one frame of every registered platform (or of
+those named) that has a render check (its kit's `render_check` hook: ManiSkill on SAPIEN, LIBERO on MuJoCo, …)
+on the CPU, or fail clearly."""
 
 from __future__ import annotations
 
 import sys
 
-BUILTIN = ("maniskill", "libero")
+import numpy as np
 
 
-def main() -> int:
-    from wsp_data.platforms import kit
-    from wsp_data.platforms.maniskill.runtime import LAVAPIPE_ICD, configure_cpu_rendering
+def main(names: list[str] | None = None) -> int:
+    from wsp_data.platforms import KITS, NotSupported, PlatformKit
 
-    configure_cpu_rendering()
-    if not LAVAPIPE_ICD.exists():
-        print(f"render check: {LAVAPIPE_ICD} missing; install mesa-vulkan-drivers 25 (scripts/setup.sh)", file=sys.stderr)
-        return 1
-    for name in BUILTIN:
-        simulator = kit(name).info.simulator
+    checked = 0
+    for name in names or list(KITS):
+        k = KITS[name]
+        if type(k).render_check is PlatformKit.render_check:
+            continue  # the platform declares no render check
         try:
-            frame = kit(name).render_check()
+            frame = k.render_check()
+        except NotSupported:
+            continue
         except Exception as e:  # noqa: BLE001 - report any renderer failure as one clear line
-            print(f"render check: {name} ({simulator}) failed to render: {type(e).__name__}: {e}", file=sys.stderr)
+            print(f"render check: {name} ({k.info.simulator}) failed to render: {type(e).__name__}: {e}",
+                  file=sys.stderr)
             return 1
-        if not _good(name, frame):
+        if not _good(name, frame, (k.info.image_size, k.info.image_size, 3)):
             return 1
+        checked += 1
+    if not checked:
+        print("render check: no registered platform has a render check", file=sys.stderr)
+        return 1
     return 0
 
 
-def _good(name: str, frame) -> bool:
-    if frame.shape != (128, 128, 3) or frame.max() == 0:
-        print(f"render check: {name}: bad frame {frame.shape}, max {frame.max()}", file=sys.stderr)
+def _good(name: str, frame: np.ndarray, shape: tuple[int, ...]) -> bool:
+    frame = np.asarray(frame)
+    if frame.shape != shape or frame.dtype != np.uint8 or frame.max() == 0:
+        print(f"render check: {name}: bad frame {frame.shape} {frame.dtype}, max {frame.max()} (expected {shape} "
+              "uint8, not black)", file=sys.stderr)
         return False
     print(f"render check: {name} ok, frame {frame.shape}, mean {frame.mean():.1f}")
     return True
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

@@ -10,7 +10,7 @@ from collections.abc import Hashable, Sequence
 
 import numpy as np
 
-from wsp_data.platforms.interface import ARM, PlatformKit, Rollout, joint_blocked
+from wsp_data.platforms.interface import ARM, PlatformError, PlatformKit, Rollout, joint_blocked
 from wsp_data.schema import PLATFORM_INFO
 
 
@@ -113,7 +113,11 @@ class ManiSkillKit(PlatformKit):
     # -- tools ----------------------------------------------------------------------------------------------
     def render_check(self) -> np.ndarray:
         from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+        from wsp_data.platforms.maniskill.runtime import LAVAPIPE_ICD, configure_cpu_rendering
 
+        configure_cpu_rendering()
+        if not LAVAPIPE_ICD.exists():
+            raise PlatformError(f"{LAVAPIPE_ICD} missing; install mesa-vulkan-drivers 25 (scripts/setup.sh)")
         with ManiSkillPlatform("PickCube") as p:
             return p.reset(seed=0).rgb
 
