@@ -28,7 +28,7 @@ STEP = 0.01  # m: the expert's hand path per step
 CAM_Z, CAM_C, FOCAL = 2.0, (0.0, 0.25), 400.0  # top-down pinhole: height (m), centre xy (m), focal length (px)
 QLIMITS = np.array([[-math.pi, math.pi]] * 2 + [[-1.0, 1.0]] * 5 + [[0.0, 0.04]] * 2, dtype=np.float32)
 INFO = PlatformInfo(
-    "planar", FPS, IMAGE_SIZE, "top_camera", "planar_2link",
+    "planar", FPS, IMAGE_SIZE, IMAGE_SIZE, "top_camera", "planar_2link",
     "joint position targets q0, q1 (rad) + gripper (1 open; unused)", ("q0", "q1", "gripper"),
     "action.ee", "hand target in the world plane (m) + gripper (forward kinematics of the joint targets)",
     ("x", "y", "gripper"), "tests/test_plugin_platform.py: numpy kinematics, OpenCV rendering")
@@ -185,7 +185,7 @@ class PlanarKit(PlatformKit):
 
     name = "planar"
     info = INFO
-    perturbed_dims = 2
+    perturbed_dims = (0, 1)  # a tuple of dimensions (a two-arm platform lists each arm's joints)
     action_bounds = None
     gripper_dim = 2
     gripper_open = 1.0

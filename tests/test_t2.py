@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 from conftest import T2_TASKS as TASKS
-from conftest import assert_source_episodes, instance_rows, open_lerobot
+from conftest import assert_source_episodes, build_tiny, instance_rows, open_lerobot, release_files
 
 from wsp_data.builders.t2 import (
     BLOCK_STEPS, MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
@@ -152,3 +152,16 @@ def test_collision_checks_on_hand_built_states():
     assert not object_flung(poses)
     poses[15:, 0, 1] += 0.051  # 1.02 m/s horizontally for one frame
     assert object_flung(poses)
+
+
+def test_a_bounded_rig_cache_gives_the_same_config(release, tmp_path_factory, monkeypatch):
+    """T2 keeps every task's typical stream apart from its rig, so a platform's `rigs_per_worker` bounds it
+    (to at least 2: one attempt holds its receiver's and its donor's rig). Bounded to 1 here (so 2 rigs over
+    three tasks: rigs are closed and made again mid-build), the config's files are those of the shared
+    release's unbounded build."""
+    from wsp_data.platforms.maniskill.kit import ManiSkillKit
+
+    monkeypatch.setattr(ManiSkillKit, "rigs_per_worker", 1)
+    out = build_tiny(tmp_path_factory, "t2", 3, TASKS)
+    ours = {k: v for k, v in release_files(out).items() if k.startswith("t2_maniskill/")}
+    assert ours and ours == {k: v for k, v in release_files(release).items() if k.startswith("t2_maniskill/")}

@@ -280,6 +280,24 @@ def test_frozen_and_armless_videos_fail_the_gate():
         assert s.gate == pytest.approx(0.0, abs=0.05) and not s.gate_passed and s.score == 0.0
 
 
+def test_two_hands_moving_toward_each_other_pass_a_per_hand_gate():
+    """Two 40 px hands start at x = 60 and x = 196 and meet 40 px nearer the middle each (mirror paths): one
+    centroid over both barely moves (the hands' motions cancel), so a two-arm robot's gate is per hand
+    (`hands`: each hand's frame-0 pixel; seeds go to the nearer hand) and g is the larger hand's, 40 px.
+    A frozen video fails every hand."""
+    n = 21
+    left = lambda t: (60 + round(40 * t / (n - 1)), 60)  # noqa: E731
+    right = lambda t: (196 - round(40 * t / (n - 1)), 60)  # noqa: E731
+    frames = video(n, [(HAND, left), (texture(40, 3), right)])
+    mask = np.zeros((S, S), np.uint8)
+    mask[40:80, 40:80] = mask[40:80, 176:216] = 2
+    hands = np.array([[60.0, 60.0], [196.0, 60.0]])
+    assert tr.motion_gate(frames, mask) < 3.0
+    assert tr.motion_gate(frames, mask, hands=hands) == pytest.approx(40.0, abs=0.5)
+    frozen = np.repeat(frames[:1], n, axis=0)
+    assert tr.motion_gate(frozen, mask, hands=hands) == pytest.approx(0.0, abs=0.05)
+
+
 # -- the score ---------------------------------------------------------------------------------------
 def test_score_passes_a_faithful_video_and_fails_a_moved_object():
     n = 21

@@ -113,6 +113,8 @@ def _render_card(root: Path, release: dict, card_configs: list[dict]) -> None:
 
 def _write_croissant(root: Path, release: dict, card_configs: list[dict]) -> None:
     """Croissant 1.0 metadata with the core fields and the responsible-AI (RAI) fields."""
+    infos = [kit(p).info for p in dict.fromkeys(c["platform"] for c in card_configs)]
+    sizes = ", ".join(dict.fromkeys(f"{p.width}x{p.height}" for p in infos))
     doc = {
         "@context": {"@vocab": "https://schema.org/", "cr": "http://mlcommons.org/croissant/",
                      "rai": "http://mlcommons.org/croissant/RAI/", "sc": "https://schema.org/"},
@@ -125,13 +127,13 @@ def _write_croissant(root: Path, release: dict, card_configs: list[dict]) -> Non
                           "sha256": sha256(root / c["name"] / INSTANCES)} for c in card_configs],
         "recordSet": [{"@type": "cr:RecordSet", "@id": c["name"], "name": c["name"],
                        "description": c["suite_description"]} for c in card_configs],
-        "rai:dataCollection": "Generated in simulation (ManiSkill3/SAPIEN and LIBERO/MuJoCo, CPU) from scripted expert trajectories "
-                              "and controlled interventions; validated from simulator state.",
+        "rai:dataCollection": f"Generated in simulation ({'; '.join(p.simulator for p in infos)}; CPU) from scripted "
+                              "expert trajectories and controlled interventions; validated from simulator state.",
         "rai:dataCollectionType": "Simulation",
         "rai:personalSensitiveInformation": "None: no people, no personal data.",
         "rai:dataBiases": "Scripted experts move in straight end-effector lines at fixed speeds; tasks cover "
-                          "tabletop single-arm Panda manipulation only.",
-        "rai:dataLimitations": "Simulator rendering at 128x128; references are simulator ground truth, not real "
+                          f"tabletop manipulation by {', '.join(dict.fromkeys(p.robot_type for p in infos))} only.",
+        "rai:dataLimitations": f"Simulator rendering at {sizes}; references are simulator ground truth, not real "
                                "robot footage.",
         "rai:dataUseCases": "Evaluating and diagnosing action-conditioned video world models; training them.",
         "rai:dataSocialImpact": "Diagnostic benchmark; no foreseeable direct harm.",

@@ -43,12 +43,12 @@ def frame_features(info: PlatformInfo) -> dict:
     never executed. `action` is the platform's native stream; the other stream (`alt_action_key`) is stored
     beside it. Policy inputs (`observation.*`: the camera, joint state, end-effector pose) hold no padding and
     no NaN; simulator ground truth is under `sim.*` and the robot masks in ROBOT_MASKS, outside the features."""
-    img = (IMAGE_SIZE, IMAGE_SIZE, 3)
+    img = (info.height, info.width, 3)
     hwc = ["height", "width", "channels"]
     return {
         info.video_key: {"dtype": "video", "shape": img, "names": hwc},
-        "observation.state": {"dtype": "float32", "shape": (9,), "names": [f"q{i}" for i in range(7)] + ["finger_l", "finger_r"]},
-        "observation.ee_pose": {"dtype": "float32", "shape": (7,), "names": ["x", "y", "z", "qw", "qx", "qy", "qz"]},
+        "observation.state": {"dtype": "float32", "shape": (len(info.state_names),), "names": list(info.state_names)},
+        "observation.ee_pose": {"dtype": "float32", "shape": (len(info.ee_names),), "names": list(info.ee_names)},
         OBJECT_POSES_KEY: {"dtype": "float32", "shape": (MAX_OBJECTS * 7,), "names": None},
         CONTACTS_KEY: {"dtype": "float32", "shape": (MAX_OBJECTS,), "names": None},
         "action": {"dtype": "float32", "shape": (len(info.action_names),), "names": list(info.action_names)},
@@ -58,13 +58,20 @@ def frame_features(info: PlatformInfo) -> dict:
     }
 
 
+PANDA_STATE = tuple(f"q{i}" for i in range(7)) + ("finger_l", "finger_r")  # 7 arm joints (rad) + 2 fingers (m)
+EE_POSE = ("x", "y", "z", "qw", "qx", "qy", "qz")  # world position (m) + quaternion
+
+
 @dataclass(frozen=True)
 class PlatformInfo:
-    """What a reader of a release needs to know about a platform (SPEC §2)."""
+    """What a reader of a release needs to know about a platform (SPEC §2). `width` × `height`: the camera's
+    frames (px); `state_names` / `ee_names`: the columns of `observation.state` (arm joints first) and
+    `observation.ee_pose` (per arm, xyz + quaternion wxyz); `state_text`: the state in words (the card)."""
 
     name: str
     fps: int
-    image_size: int
+    width: int
+    height: int
     camera: str
     robot_type: str
     action_space: str  # the native stream, column `action`
@@ -73,22 +80,31 @@ class PlatformInfo:
     alt_action_space: str
     alt_action_names: tuple[str, ...]
     simulator: str
+    state_names: tuple[str, ...] = PANDA_STATE
+    ee_names: tuple[str, ...] = EE_POSE
+    state_text: str = "robot joint positions (7 arm + 2 fingers)"
+
+    def __post_init__(self):
+        if self.width <= 0 or self.height <= 0 or self.fps <= 0:
+            raise ValueError(f"platform {self.name!r}: width, height and fps must be positive")
+        if len(self.ee_names) % 7:
+            raise ValueError(f"platform {self.name!r}: ee_names must hold xyz + quaternion per arm (7 each)")
 
     @property
     def video_key(self) -> str:
         return f"observation.images.{self.camera}"
 
 
-_JOINTS = tuple(f"q{i}" for i in range(7))
+_JOINTS = PANDA_STATE[:7]
 _EE_DELTA = ("dx", "dy", "dz", "drx", "dry", "drz", "gripper")
 PLATFORM_INFO = {
     "maniskill": PlatformInfo(
-        "maniskill", FPS, IMAGE_SIZE, "base_camera", "panda",
+        "maniskill", FPS, IMAGE_SIZE, IMAGE_SIZE, "base_camera", "panda",
         "pd_joint_pos: 7 joint position targets (rad) + gripper (1 open … -1 closed)", _JOINTS + ("gripper",),
         "action.ee", "TCP target in the robot base frame (m), XYZ Euler angles (rad), gripper (forward kinematics of "
         "the joint targets)", ("x", "y", "z", "rx", "ry", "rz", "gripper"), "ManiSkill 3.0.1 on SAPIEN 3.0.3"),
     "libero": PlatformInfo(
-        "libero", FPS, IMAGE_SIZE, "agentview", "panda",
+        "libero", FPS, IMAGE_SIZE, IMAGE_SIZE, "agentview", "panda",
         "OSC_POSE deltas in [-1, 1]: end-effector position (x0.05 m), axis-angle rotation (x0.5 rad), gripper "
         "(-1 open ... 1 closed)", _EE_DELTA,
         "action.joint", "the 7 joint positions (rad) each action reached + the gripper command", _JOINTS + ("gripper",),

@@ -360,14 +360,26 @@ def gate_frames(num_frames: int) -> tuple[int, int, int]:
     return 0, (num_frames - 1) // 2, num_frames - 1
 
 
-def motion_gate(video: ScoringVideo | np.ndarray, reference_mask0: np.ndarray, track_fn: TrackFn | None = None
-                ) -> float:
+def motion_gate(video: ScoringVideo | np.ndarray, reference_mask0: np.ndarray, track_fn: TrackFn | None = None,
+                hands: np.ndarray | None = None) -> float:
     """g = max pairwise distance, over the gate frames, of the distal-arm centroid tracked (chained) from a
-    grid seeded at frame 0 on the reference mask's label 2. No seed point or no texture: g = 0."""
+    grid seeded at frame 0 on the reference mask's label 2. No seed point or no texture: g = 0.
+
+    `hands` (K, 2): on a K-arm robot, each hand's frame-0 position in the scoring frame; each seed point
+    belongs to the nearest hand, each hand has its own centroid, and g is the largest hand's g (one centroid
+    over two hands moving toward each other barely moves; a frozen or arm-less video still fails every hand)."""
     seeds = arm_grid(reference_mask0)
     if track_fn is None:
         video = video.grey if isinstance(video, ScoringVideo) else video
     tracks = (track_fn or track)(video, seeds, anchored=False)
+    if hands is None:
+        return _gate(tracks)
+    owner = np.linalg.norm(seeds[:, None] - np.asarray(hands, np.float64)[None], axis=-1).argmin(axis=1)
+    return max((_gate(Tracks(tracks.positions[:, owner == k], tracks.visible[:, owner == k]))
+                for k in range(len(hands))), default=0.0)
+
+
+def _gate(tracks: Tracks) -> float:
     if not tracks.visible[0].any():
         return 0.0
     c = centroid_path(tracks, anchored=False)[list(gate_frames(len(tracks.positions)))]
@@ -387,18 +399,20 @@ class T4Score:
 
 
 def t4_score(frames: np.ndarray, object_px: np.ndarray, reference_mask0: np.ndarray,
-             gate_reference: float, visible_reference: float | None = None, tracker=None) -> T4Score:
+             gate_reference: float, visible_reference: float | None = None, tracker=None,
+             hands: np.ndarray | None = None) -> T4Score:
     """S = 100·1[g ≥ GATE_RATIO·g_ref]·1[tracked]·1[d ≤ MOTION_MAX] for one video (any size; resized to 256²).
     `object_px`: the evaluated object's frame-0 position in the scoring frame; `reference_mask0`: the
     reference robot label mask at frame 0; `gate_reference`: g of the reference (stored per instance);
     `visible_reference`: the fraction of reference frames in which the same tracker sees the object (None
     skips the tracking-failure rule, as the builder does on the reference itself); `tracker`: a tracker
-    backend (`wsp_eval.backends.tracker`; default this module's colour region + Lucas–Kanade)."""
+    backend (`wsp_eval.backends.tracker`; default this module's colour region + Lucas–Kanade); `hands`: each
+    hand's frame-0 pixel on a robot with more than one arm (`motion_gate`)."""
     if not gate_reference > 0:
         raise ValueError(f"gate_reference must be positive, got {gate_reference}")
     video = tracker.prepare(frames) if tracker else scoring_video(frames)
     motion = object_motion(video, object_px, reference_mask0, tracker)
-    g = motion_gate(video, reference_mask0, tracker.track if tracker else None)
+    g = motion_gate(video, reference_mask0, tracker.track if tracker else None, hands)
     passed = g >= GATE_RATIO * gate_reference
     tracked = visible_reference is None or motion.visible_fraction >= TRACKED_RATIO * visible_reference
     ok = passed and tracked and motion.displacement <= MOTION_MAX

@@ -54,7 +54,8 @@ class T1Builder(SuiteBuilder):
             return Dropped("source_failed")
         if len(source) < WINDOW + 2:
             return Dropped("source_too_short")
-        dim = int(rng.integers(rig.kit.perturbed_dims))
+        dims = rig.kit.t1_dims()
+        dim = dims[int(rng.integers(len(dims)))]
         direction = int(rng.choice([-1, 1]))
         start = int(rng.integers(0, len(source) - WINDOW + 1))
         small, large = sorted(float(m) for m in rng.choice(MAGNITUDES, size=2, replace=False))

@@ -154,22 +154,31 @@ class T2Builder(SuiteBuilder):
         if MAX_ATTEMPTS * config.count > DONOR_SEED_OFFSET:
             raise ValueError(f"T2 supports at most {DONOR_SEED_OFFSET // MAX_ATTEMPTS} instances per config: receiver "
                              f"scene seeds must stay below the donor seeds (offset {DONOR_SEED_OFFSET})")
-        # unbounded: an attempt holds the receiver while it reads every task's typical stream for its donors
-        self.rig = RigCache(lambda task: _TaskRig(task, config.platform))
+        # an attempt holds two rigs (receiver and donor); every task's typical stream is kept apart from its rig,
+        # so a platform's `rigs_per_worker` bounds T2 too (with at least those two)
+        bound = self.kit.rigs_per_worker
+        self.rig = RigCache(lambda task: _TaskRig(task, config.platform), None if bound is None else max(2, bound))
+        self._typical: dict[str, np.ndarray] = {}
 
     def close(self) -> None:
         self.rig.close()
 
+    def typical(self, task: str) -> np.ndarray:
+        """`task`'s typical arm stream (`typical_arm_stream`), computed once per worker."""
+        if task not in self._typical:
+            self._typical[task] = self.rig(task).typical
+        return self._typical[task]
+
     def compatible_donors(self, receiver: str) -> list[str]:
         """The config's other tasks whose typical stream starts within START_GAP (every arm joint) of the
         receiver's: a donor from another start (e.g. the wrist turned by π/2) would jerk the arm in step one."""
-        start = self.rig(receiver).typical[0]
+        start = self.typical(receiver)[0]
         return [t for t in dict.fromkeys(self.config.tasks)
-                if t != receiver and np.abs(self.rig(t).typical[0] - start).max() <= START_GAP]
+                if t != receiver and np.abs(self.typical(t)[0] - start).max() <= START_GAP]
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
-        receiver = self.rig(plan.task)
         donors = self.compatible_donors(plan.task)
+        receiver = self.rig(plan.task)  # after the typical streams: a bounded cache keeps it and the donor's rig
         if not donors:
             return Dropped("no_compatible_donor")
         donor_task = donors[int(rng.integers(len(donors)))]
@@ -195,7 +204,8 @@ class T2Builder(SuiteBuilder):
         row = {
             "task": plan.task, "seed": seed, "instruction": receiver.spec.instruction,
             "objects": list(receiver.spec.objects), "source": f"scripted_expert (donor: {donor_task})",
-            "donor_task": donor_task, "donor_seed": donor_seed, "mismatch": motion_mismatch(stream, receiver.typical, self.kit),
+            "donor_task": donor_task, "donor_seed": donor_seed,
+            "mismatch": motion_mismatch(stream, self.typical(plan.task), self.kit),
             "active_windows": int((active > 0).sum()), "num_windows": len(active),
             "interventions": {"reference": {"donor_task": donor_task, "donor_seed": donor_seed}},
         }

@@ -38,7 +38,6 @@ KINDS = ("distractor", "false_contact", "spatial_proximity")
 
 POS_TOL = 0.005  # m: an object that never strays this far from its frame-0 position "stays put"
 ROT_TOL = 0.05  # rad: … and never turns this far
-FINGER_OPEN = 0.035  # m: each Panda finger joint opens to 0.04; below this the gripper closed on something
 SWEPT_MARGIN = 0.10  # m: a moved target's footprint keeps this far from every low robot link origin
 DISTRACTOR_MARGIN = 0.05  # m: the same for a distractor (a prefilter only: the contact check decides)
 REACH_Z = 0.12  # m: link origins above this height cannot touch a tabletop object (≤ 5 cm tall)
@@ -86,16 +85,16 @@ def static(poses: np.ndarray) -> bool:
     return bool(dp.max() < POS_TOL and dq.max() < ROT_TOL)
 
 
-def fingers_closed(qpos: np.ndarray) -> bool:
-    """Some frame has a finger joint nearer than FINGER_OPEN to closed (ManiSkill's fingers open to +0.04,
-    LIBERO's to +0.04 and −0.04)."""
-    return bool((np.abs(qpos[:, 7:9]) < FINGER_OPEN).any())
+def fingers_closed(k, qpos: np.ndarray) -> bool:
+    """Some frame has a finger joint of the platform's `finger_dims` nearer than its `finger_closed_below` to
+    closed (Panda's fingers open to ±0.04 m)."""
+    return bool((np.abs(qpos[:, list(k.finger_dims)]) < k.finger_closed_below).any())
 
 
 def false_contact(rig, base, source: np.ndarray, sight: Sight) -> Proposal | str:
-    """The expert's stream with the gripper command clamped fully open throughout (the platform's own
-    gripper dimension and open value)."""
-    dim, opened = rig.kit.gripper_dim, rig.kit.gripper_open
+    """The expert's stream with every gripper command clamped fully open throughout (the platform's own
+    gripper dimensions and open value)."""
+    dim, opened = list(np.atleast_1d(rig.kit.gripper_dim)), rig.kit.gripper_open
     if not (source[:, dim] != opened).any():
         return "source_never_closes"
     if not sight(base.observations[0].object_poses[0, :3]):
@@ -132,8 +131,9 @@ class T4Builder(SuiteBuilder):
                    "path, gripper clamped open), spatial proximity (target moved outside the robot's swept region). "
                    "The evaluated object never moves: `evaluated_object` (index `evaluated_object_index` in "
                    "`objects`), its frame-0 pixel `object_pixel_256` in the 256x256 scoring frame, and the "
-                   "reference motion gate `gate_reference` (px). Score: tracked object displacement <= 10 px "
-                   "behind a distal-arm motion gate.")
+                   "reference motion gate `gate_reference` (px; on a two-arm robot per hand, from each hand's "
+                   "frame-0 pixel `hand_pixels_256`). Score: tracked object displacement <= 10 px behind a "
+                   "distal-arm motion gate.")
     roles = ("reference",)
 
     def __init__(self, config: BuildConfig):
@@ -168,9 +168,18 @@ class T4Builder(SuiteBuilder):
             return None if ro.success else "task_failed"
         if contacts.any():
             return "other_object_contacted"
-        if kind == "false_contact" and fingers_closed(ro.stack("qpos")):
+        if kind == "false_contact" and fingers_closed(self.kit, ro.stack("qpos")):
             return "gripper_closed"
         return None
+
+    def hand_pixels(self, ref) -> np.ndarray | None:
+        """Each hand's frame-0 pixel in the scoring frame (K, 2) on a robot with K > 1 arms (the gate is then
+        per hand, `motion_gate`); None on a single arm."""
+        tcp, arms = ref.observations[0].tcp_pose, len(self.kit.info.ee_names) // 7
+        if arms < 2:
+            return None
+        size = frame_size(ref.observations[0].rgb)
+        return np.array([project(tcp[7 * a:7 * a + 3], ref.intrinsic, ref.extrinsic, size) for a in range(arms)])
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
         rig, kind = self.rig(plan.task), plan.group
@@ -195,15 +204,16 @@ class T4Builder(SuiteBuilder):
         pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic,
                         frame_size(ref.observations[0].rgb))
         rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
+        hands = self.hand_pixels(ref)
         video = scoring_video(rgb)
-        gate = motion_gate(video, mask0)
+        gate = motion_gate(video, mask0, hands=hands)
         if gate < GATE_MIN_REFERENCE:
             return Dropped("gate_too_small", rendered, simulated, {"gate": gate})
         motion = object_motion(video, pixel, mask0)
         if motion.textured_points < MIN_TEXTURED or motion.visible_fraction < MIN_VISIBLE:
             return Dropped("object_untrackable", rendered, simulated,
                            {"textured": motion.textured_points, "visible": motion.visible_fraction})
-        score = t4_score(rgb, pixel, mask0, gate)
+        score = t4_score(rgb, pixel, mask0, gate, hands=hands)
         if score.score != 100.0:
             return Dropped("reference_fails_tracker", rendered, simulated, {"d": score.displacement})
         if score.displacement > REFERENCE_D_MAX:
@@ -215,6 +225,8 @@ class T4Builder(SuiteBuilder):
             "displacement_reference": score.displacement, "object_visible_fraction": motion.visible_fraction,
             "interventions": {"reference": proposal.params},
         }
+        if hands is not None:
+            row["hand_pixels_256"] = hands.tolist()
         src = rig.replay(rig.render, seed, original)  # the unperturbed source rollout
         return Kept(row, [RolloutArrays.from_rollout("reference", ref), RolloutArrays.from_rollout(SOURCE_ROLE, src)],
                     rendered + len(source), simulated)

@@ -26,10 +26,11 @@ JOINT_LIMIT_TOL = 0.01  # rad
 
 def check_rollout(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarray, actions: np.ndarray,
                   qlimits: np.ndarray, native: np.ndarray | None = None,
-                  bounds: tuple[float, float] | None = None) -> str | None:
-    """qpos (T+1, 9), tcp_pose (T+1, 7), object_poses (T+1, K, 7) NaN-padded, actions (T, ≥7) joint targets
-    (on LIBERO: the joint positions reached), qlimits (9, 2) lower/upper; `native` (T, D) with `bounds`: the
-    native stream and the range its controller accepts."""
+                  bounds: tuple[float, float] | None = None, arm: int = 7) -> str | None:
+    """qpos (T+1, S) with the `arm` arm joints first (Panda: 7 arm joints + 2 fingers), tcp_pose (T+1, ≥7),
+    object_poses (T+1, K, 7) NaN-padded, actions (T, ≥arm) joint targets (on LIBERO: the joint positions
+    reached), qlimits (S, 2) lower/upper; `native` (T, D) with `bounds`: the native stream and the range its
+    controller accepts."""
     if len(qpos) != len(actions) + 1:
         return "incomplete"
     if native is not None and bounds is not None and ((native < bounds[0]).any() or (native > bounds[1]).any()):
@@ -38,12 +39,12 @@ def check_rollout(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndarr
     objs = object_poses[:, used]
     if not (np.isfinite(qpos).all() and np.isfinite(tcp_pose).all() and np.isfinite(objs).all()):
         return "nonfinite_state"
-    lo, hi = qlimits[:7, 0], qlimits[:7, 1]
-    if (actions[:, :7] < lo).any() or (actions[:, :7] > hi).any():
+    lo, hi = qlimits[:arm, 0], qlimits[:arm, 1]
+    if (actions[:, :arm] < lo).any() or (actions[:, :arm] > hi).any():
         return "joint_limit"
     if (qpos < qlimits[:, 0] - JOINT_LIMIT_TOL).any() or (qpos > qlimits[:, 1] + JOINT_LIMIT_TOL).any():
         return "joint_limit"
-    if len(qpos) > 1 and (np.abs(np.diff(qpos[:, :7], axis=0)) * FPS > MAX_JOINT_SPEED).any():
+    if len(qpos) > 1 and (np.abs(np.diff(qpos[:, :arm], axis=0)) * FPS > MAX_JOINT_SPEED).any():
         return "instability"
     if objs.size:
         pos = objs[..., :3]

@@ -9,7 +9,7 @@ Hooks are grouped by the suites that call them:
 
 - core (T1, T2, train, and every other suite): `tasks`, `make_expert`, `make_renderer`, `joint_stream`,
   `arm_motion`, `blocked` and the attributes `name`, `info`, `perturbed_dims`, `action_bounds`, `gripper_dim`,
-  `gripper_open`;
+  `gripper_open`, `arm_joints`, `finger_dims`, `finger_closed_below`;
 - T3: `t3_tasks`, `t3_source`, `expert_script`;
 - T4: `t4_kind_tasks`, `t4_needs`, `t4_rig`;
 - T5: `t5_primitives`, `t5_primitive_tasks`, `t5_needs`, `t5_scene`, `t5_rig`, `t5_rule_thresholds`;
@@ -56,13 +56,14 @@ def joint_blocked(qpos: np.ndarray, tcp_pose: np.ndarray, actions: np.ndarray) -
 class Observation:
     """What a platform records after a reset or a step."""
 
-    qpos: np.ndarray  # (9,) float32: 7 arm joints + 2 finger joints
-    tcp_pose: np.ndarray  # (7,) float32: end-effector (TCP / grip site) world position + quaternion (wxyz)
+    qpos: np.ndarray  # (S,) float32, `info.state_names`: the arm joints first (Panda: 7 arm joints + 2 fingers)
+    tcp_pose: np.ndarray  # (E,) float32, `info.ee_names`: end-effector (TCP / grip site) world position +
+    #                       quaternion (wxyz), one after the other for each arm
     object_poses: np.ndarray  # (MAX_OBJECTS, 7) float32, NaN where the task has fewer objects
     contacts: np.ndarray  # (MAX_OBJECTS,) bool: any robot link touches the object
     success: bool
-    rgb: np.ndarray | None = None  # (128, 128, 3) uint8
-    mask: np.ndarray | None = None  # (128, 128) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
+    rgb: np.ndarray | None = None  # (info.height, info.width, 3) uint8
+    mask: np.ndarray | None = None  # (info.height, info.width) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
 
 
 @dataclass
@@ -120,31 +121,44 @@ class PlatformKit(ABC):
     Attributes (class attributes of a subclass):
         `name`: the platform's registry name (`wsp build --platform NAME`, config names `t1_NAME`).
         `info`: `PlatformInfo` (camera, robot, action streams, simulator) the writer stores in the release.
-        `perturbed_dims`: T1 perturbs native action dimensions `0 … perturbed_dims-1` (never the gripper).
+        `perturbed_dims`: T1 perturbs one of the native action dimensions `0 … perturbed_dims-1` (an int) or
+            of those listed (a tuple), never a gripper (`t1_dims`).
         `action_bounds`: (low, high) range the controller accepts unclipped, or None (no bound); the common
             validity check drops a stream outside it. Units: native action units.
-        `gripper_dim`, `gripper_open`: the gripper's index in the native action and its fully open command
-            (T4 false contact clamps it open).
+        `gripper_dim`, `gripper_open`: the gripper's index in the native action (a tuple: one per hand) and
+            its fully open command (T4 false contact clamps every gripper open).
+        `arm_joints`: the arm joints lead the state (`Observation.qpos`), the joint stream and the joint
+            limits; the common validity check reads these columns.
+        `finger_dims`, `finger_closed_below`: state columns of finger joints and the |position| below which a
+            finger closed on something (m; T4 drops a false contact whose fingers closed).
 
     Objects the hooks return (duck-typed, see docs/adding_a_platform.md):
         task spec: `.name`, `.instruction` (str), `.objects` (tuple of recorded object names, target first),
             `.target` (str).
         platform (a replayer): `.replay(seed, actions, placements=None) -> Rollout`, `.reset(seed) ->
-            Observation`, `.qlimits` ((9, 2) rad / m joint limits), `.camera_params()`, `.close()`.
+            Observation`, `.qlimits` ((S, 2) rad / m joint limits, the state's columns), `.camera_params()`, `.close()`.
         expert source: `.trajectory(seed) -> (T, D) float32 | None` (None: no verified success on that
             seed), `.replayer` (an unrendered platform), `.spec`, `.close()`.
     """
 
     name: ClassVar[str]
     info: ClassVar[PlatformInfo]
-    perturbed_dims: ClassVar[int]
+    perturbed_dims: ClassVar[int | tuple[int, ...]]
     action_bounds: ClassVar[tuple[float, float] | None] = None
-    gripper_dim: ClassVar[int]
+    gripper_dim: ClassVar[int | tuple[int, ...]]
     gripper_open: ClassVar[float]
+    arm_joints: ClassVar[int] = ARM
+    finger_dims: ClassVar[tuple[int, ...]] = (7, 8)  # Panda's two finger joints …
+    finger_closed_below: ClassVar[float] = 0.035  # … open to ±0.04 m
     default_counts: ClassVar[dict[str, int]] = {}  # `wsp build`'s --count when none is given, per suite (the
     #   paper's counts, SPEC §3); a suite without one defaults to 100 episodes per selected task
     rigs_per_worker: ClassVar[int | None] = None  # task rigs (simulators) a build worker keeps alive at once,
     #   least recently used closed first; None: every task's (`wsp_data.builders.rig.RigCache`)
+
+    def t1_dims(self) -> tuple[int, ...]:
+        """The native action dimensions T1 may perturb (`perturbed_dims` as a tuple)."""
+        dims = self.perturbed_dims
+        return tuple(range(dims)) if isinstance(dims, int) else tuple(dims)
 
     # -- support -----------------------------------------------------------------------------------------
     def unsupported(self, suite: str) -> str | None:
@@ -186,8 +200,8 @@ class PlatformKit(ABC):
         """A rendering replayer of `task` that records `objects` (pose and contact columns, in order).
 
         Returns:
-            a platform whose `replay` fills `Observation.rgb` ((128, 128, 3) uint8) and `.mask` ((128, 128)
-            uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers), and sets the rollout's camera `intrinsic`
+            a platform whose `replay` fills `Observation.rgb` ((H, W, 3) uint8, `info.height` × `info.width`)
+            and `.mask` ((H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers), and sets the rollout's camera `intrinsic`
             (3, 3) and `extrinsic` (3, 4, OpenCV world→camera, m).
         Called:
             once per task per build worker, after an unrendered replay passed validation.
@@ -198,7 +212,8 @@ class PlatformKit(ABC):
         """The joint targets the common joint-limit check reads.
 
         Returns:
-            (T, ≥7) float32: the native stream if it is joint targets, else the joint positions reached.
+            (T, ≥arm_joints) float32: the native stream if it is joint targets, else the joint positions
+            reached (the arm joints first, in the state's order).
         Units:
             rad (arm joints).
         Called:
@@ -223,7 +238,7 @@ class PlatformKit(ABC):
         """Whether the arm was held back by something it collided with.
 
         Args:
-            qpos (T+1, 9), tcp_pose (T+1, 7) (m, quaternion wxyz), actions (T, D) native.
+            qpos (T+1, S), tcp_pose (T+1, E) (m, quaternion wxyz), actions (T, D) native.
         Returns:
             True when the arm was blocked (T2 drops the donor replay as `arm_blocked`).
         Called:
@@ -347,5 +362,6 @@ class PlatformKit(ABC):
     # -- tools ----------------------------------------------------------------------------------------------
     def render_check(self) -> np.ndarray:
         """Render one frame of the platform's first task on this machine (`python -m
-        wsp_data.platforms.render_check`). Returns (128, 128, 3) uint8; raises on a renderer failure."""
+        wsp_data.platforms.render_check`). Returns (info.height, info.width, 3) uint8; raises on a renderer
+        failure."""
         raise NotSupported(f"{self.name} has no render check")

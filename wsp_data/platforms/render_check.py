@@ -25,7 +25,7 @@ def main(names: list[str] | None = None) -> int:
             print(f"render check: {name} ({k.info.simulator}) failed to render: {type(e).__name__}: {e}",
                   file=sys.stderr)
             return 1
-        if not _good(name, frame, (k.info.image_size, k.info.image_size, 3)):
+        if not _good(name, frame, (k.info.height, k.info.width, 3)):
             return 1
         checked += 1
     if not checked:

@@ -21,14 +21,16 @@ def prepare(ref, backends) -> dict:
     object_px, mask0 = np.asarray(ref.row["object_pixel_256"], np.float64), ref.masks("reference")[0]
     tracker = backends.tracker
     video = tracker.prepare(ref.frames("reference")) if tracker else scoring_video(ref.frames("reference"))
+    hands = ref.row.get("hand_pixels_256")  # two-arm platforms: the gate is per hand
     return {"object_px": object_px, "mask0": mask0, "gate_reference": float(ref.row["gate_reference"]),
-            "visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction}
+            "visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction,
+            "hands": None if hands is None else np.asarray(hands, np.float64)}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
     frames, _ = videos["reference"]
     s = t4_score(frames, prepared["object_px"], prepared["mask0"], prepared["gate_reference"],
-                 prepared["visible_reference"], backends.tracker)
+                 prepared["visible_reference"], backends.tracker, prepared["hands"])
     return s.score, {"displacement": s.displacement, "gate": s.gate, "gate_passed": s.gate_passed,
                      "visible_fraction": s.visible_fraction, "tracked": s.tracked}
 
