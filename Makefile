@@ -17,6 +17,12 @@ LT2 ?= 4
 LT3 ?= 8
 LT4 ?= 3
 LT5 ?= 4
+# ALOHA (two arms): T1, T2, T4 and T5 over its 8 tasks, T3 over its five T3 tasks (one group of eight sources)
+AT1 ?= 4
+AT2 ?= 4
+AT3 ?= 8
+AT4 ?= 3
+AT5 ?= 8
 WSP = .venv/bin/wsp
 
 .PHONY: setup release test
@@ -24,7 +30,7 @@ WSP = .venv/bin/wsp
 setup:
 	@bash scripts/setup.sh
 
-# Build a small release: every suite on ManiSkill and on LIBERO (T3: one group of eight sources each);
+# Build a small release: every suite on ManiSkill, on LIBERO and on ALOHA (T3: one group of eight sources each);
 # write every calibration baseline, score each, print the table.
 release: setup
 	@$(WSP) build --platform maniskill --suite t1 --count $(T1) --workers $(WORKERS) --out $(RELEASE)
@@ -37,6 +43,11 @@ release: setup
 	@$(WSP) build --platform libero --suite t3 --count $(LT3) --tasks $(LIBERO_TASKS) --workers $(WORKERS) --out $(RELEASE)
 	@$(WSP) build --platform libero --suite t4 --count $(LT4) --tasks $(LIBERO_TASKS) --workers $(WORKERS) --out $(RELEASE)
 	@$(WSP) build --platform libero --suite t5 --count $(LT5) --tasks $(LIBERO_TASKS) --workers $(WORKERS) --out $(RELEASE)
+	@$(WSP) build --platform aloha --suite t1 --count $(AT1) --workers $(WORKERS) --out $(RELEASE)
+	@$(WSP) build --platform aloha --suite t2 --count $(AT2) --workers $(WORKERS) --out $(RELEASE)
+	@$(WSP) build --platform aloha --suite t3 --count $(AT3) --workers $(WORKERS) --out $(RELEASE)
+	@$(WSP) build --platform aloha --suite t4 --count $(AT4) --workers $(WORKERS) --out $(RELEASE)
+	@$(WSP) build --platform aloha --suite t5 --count $(AT5) --workers $(WORKERS) --out $(RELEASE)
 	@$(WSP) calibrate --release $(RELEASE) --out $(CALIBRATION) --workers $(WORKERS)
 
 test: setup

@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # Idempotent set-up: system packages (Mesa 25 lavapipe and OSMesa, ffmpeg, Chromium + chromedriver for the
 # teleop page's browser test), a Python 3.12 venv in .venv with the pinned packages plus LIBERO's stack
-# (requirements/libero-no-deps.txt, without dependencies), and a check that SAPIEN and MuJoCo each render
-# one frame. Re-running after success takes seconds. It prints a few status lines; apt's and pip's output goes
-# to .wsp-setup.log (its last lines are printed when a step fails).
+# and ALOHA's scene assets (requirements/libero-no-deps.txt, aloha-no-deps.txt, without dependencies), and a
+# check that SAPIEN and MuJoCo each render one frame. Re-running after success takes seconds. It prints a few
+# status lines; apt's and pip's output goes to .wsp-setup.log (its last lines are printed when a step fails).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="$ROOT/.venv"
 STAMP="$VENV/.wsp-setup-stamp"
-KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" "$ROOT/requirements/libero-no-deps.txt" | sha256sum | cut -c1-16)"
+KEY="$(cat "$ROOT/pyproject.toml" "$ROOT/scripts/setup.sh" "$ROOT/requirements/libero-no-deps.txt" \
+  "$ROOT/requirements/aloha-no-deps.txt" | sha256sum | cut -c1-16)"
 LOG="$ROOT/.wsp-setup.log"
 log() { printf '[wsp setup] %s\n' "$*" >&2; }
 die() { printf '[wsp setup] error: %s\n' "$*" >&2; exit 1; }
@@ -77,6 +78,8 @@ python_env() {
   pip_q install -e "$ROOT[all]"
   log "installing LIBERO (hf-libero, robosuite 1.4.0, MuJoCo, scene assets) without dependencies"
   pip_q install --no-deps -r "$ROOT/requirements/libero-no-deps.txt"
+  log "installing ALOHA's scene assets (gym-aloha) without dependencies"
+  pip_q install --no-deps -r "$ROOT/requirements/aloha-no-deps.txt"
   local n; n="$("$VENV/bin/python" -m pip list 2>/dev/null | grep -c -i -E '^opencv(-contrib)?-python(-headless)? ' || true)"
   if [ "$n" != 1 ]; then
     pip_q uninstall -y opencv-python opencv-contrib-python opencv-contrib-python-headless
@@ -86,7 +89,7 @@ python_env() {
 
 system_packages
 python_env
-log "checking that SAPIEN and MuJoCo (LIBERO) each render one frame"
+log "checking that SAPIEN and MuJoCo (LIBERO, ALOHA) each render one frame"
 logged "$VENV/bin/python" -m wsp_data.platforms.render_check
 echo "$KEY" > "$STAMP"
 log "ready: $VENV"

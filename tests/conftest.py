@@ -17,7 +17,9 @@ from pathlib import Path  # noqa: E402
 
 import pytest  # noqa: E402
 
-from tiny_releases import LIBERO_SUITES, LIBERO_TASKS, T2_TASKS, TINY, build_config, shared_release  # noqa: E402,F401
+from tiny_releases import (  # noqa: E402,F401
+    ALOHA_SUITES, ALOHA_TASKS, LIBERO_SUITES, LIBERO_TASKS, T2_TASKS, TINY, build_config, shared_release,
+)
 from wsp_eval.release_format import DEFAULT_RELEASE_NAME, RELEASE_JSON  # noqa: E402
 
 
@@ -40,7 +42,7 @@ def release_files(release: Path) -> dict:
     return json.loads((release / RELEASE_JSON).read_text())["files"]
 
 
-SHARED = ("t1_release", "suites_release", "libero_release")  # in the order the pre-build step finishes them
+SHARED = ("t1_release", "suites_release", "aloha_release", "libero_release")  # the pre-build's finishing order
 
 
 def pytest_collection_modifyitems(items) -> None:
@@ -113,3 +115,11 @@ def libero_release(shared_root) -> Path:
     T1 (2 triplets), T2 (2 cross-task replays), T3 (one group of all eight sources, on the first task), T4 (one
     per kind), T5 (one per primitive), train (2)."""
     return shared_release("libero", shared_root)
+
+
+@pytest.fixture(scope="session")
+def aloha_release(shared_root) -> Path:
+    """One real ALOHA release over ALOHA_TASKS (a two-arm hand-over, a one-arm lift): T1 (2 triplets), T2 (2
+    cross-task replays), T4 (one per kind, on the hand-over), T5 (one per primitive, on the hand-over), train
+    (2)."""
+    return shared_release("aloha", shared_root)

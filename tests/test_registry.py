@@ -113,4 +113,4 @@ def test_a_third_party_platform_is_a_kit(tmp_path):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["['maniskill',", "'libero',", "'toy']", "toy"]
+    assert r.stdout.split() == ["['maniskill',", "'libero',", "'aloha',", "'toy']", "toy"]

@@ -77,16 +77,17 @@ POLICIES = {  # unchanged lerobot-train flags; no pretrained backbone (nothing d
     "diffusion": ["--policy.type=diffusion", "--policy.pretrained_backbone_weights=null"],
 }
 POLICY_INPUTS = {"maniskill": {"observation.images.base_camera", "observation.state", "observation.ee_pose"},
-                 "libero": {"observation.images.agentview", "observation.state", "observation.ee_pose"}}
+                 "libero": {"observation.images.agentview", "observation.state", "observation.ee_pose"},
+                 "aloha": {"observation.images.head", "observation.state", "observation.ee_pose"}}
 
 
 def _train_split(request, platform: str) -> Path:
     if platform == "maniskill":
         return request.getfixturevalue("release") / "train_maniskill"
-    return request.getfixturevalue("libero_release") / "train_libero"
+    return request.getfixturevalue(f"{platform}_release") / f"train_{platform}"
 
 
-@pytest.mark.parametrize("platform", ["maniskill", "libero"])
+@pytest.mark.parametrize("platform", ["maniskill", "libero", "aloha"])
 def test_lerobot_doctor_finds_no_failure(request, platform):
     """lerobot-doctor fails a split with NaN values (it once found thousands in the padded object slots); the
     zero-variance warnings it still prints are for unused `sim.*` slots, which are not policy inputs."""
@@ -100,7 +101,7 @@ def test_lerobot_doctor_finds_no_failure(request, platform):
 
 
 @pytest.mark.parametrize("policy", sorted(POLICIES))
-@pytest.mark.parametrize("platform", ["maniskill", "libero"])
+@pytest.mark.parametrize("platform", ["maniskill", "libero", "aloha"])
 def test_lerobot_train_runs_on_the_train_split(request, tmp_path, platform, policy):
     split = _train_split(request, platform)
     out = tmp_path / "run"

@@ -34,6 +34,8 @@ T2_TASKS = ("PickCube", "PushCube", "PullCube")
 LIBERO_TASKS = ("libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
                 "libero_object/pick_up_the_butter_and_place_it_in_the_basket")
 LIBERO_SUITES = (("t1", 2), ("t2", 2), ("t3", 8), ("t4", 3), ("t5", 4), ("train", 2))
+ALOHA_TASKS = ("transfer_cube", "lift_cube")  # a two-arm hand-over and a one-arm lift
+ALOHA_SUITES = (("t1", 2), ("t2", 2), ("t3", 8), ("t4", 3), ("t5", 8), ("train", 2))
 
 # name → the configs built into it, in order: (suite, platform, count, tasks, extra BuildConfig fields)
 RELEASES: dict[str, tuple[tuple[str, str, int, tuple[str, ...], dict], ...]] = {
@@ -48,6 +50,9 @@ RELEASES: dict[str, tuple[tuple[str, str, int, tuple[str, ...], dict], ...]] = {
     # replays), T3 (one group of all eight sources, on the first task), T4 (one per kind), T5 (one per
     # primitive), train (2)
     "libero": tuple((suite, "libero", count, LIBERO_TASKS, {}) for suite, count in LIBERO_SUITES),
+    # ALOHA (two arms, 320x240) over ALOHA_TASKS: T1 (2 triplets), T2 (2 cross-task replays), T3 (one group of
+    # all eight sources, on the hand-over), T4 (one per kind), T5 (one per primitive), train (2)
+    "aloha": tuple((suite, "aloha", count, ALOHA_TASKS, {}) for suite, count in ALOHA_SUITES),
 }
 
 
@@ -83,7 +88,7 @@ def offline_environment() -> None:
                       TQDM_DISABLE="1")
 
 
-PREBUILD_ORDER = ("libero", "t1", "suites")  # the longest build first; t1 then suites, in the order tests use them
+PREBUILD_ORDER = ("libero", "t1", "suites", "aloha")  # the longest first; then in the order tests use them
 
 
 def _timed(name: str, root: Path) -> tuple[str, float]:

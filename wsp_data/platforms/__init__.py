@@ -1,7 +1,7 @@
 """Simulator platforms, found by name in `KITS`; this is the one place that registers the built-in ones, and
 other distributions add theirs as `PlatformKit` objects through the entry-point group `worldsimprobe.platforms`
-(`wsp_eval.registry`). Simulators are imported only inside the platform packages (`maniskill/`, `libero/`), and
-only when a platform is first used, so building on one platform never imports the other's simulator.
+(`wsp_eval.registry`). Simulators are imported only inside the platform packages (`maniskill/`, `libero/`,
+`aloha/`), and only when a platform is first used, so building on one platform never imports another's simulator.
 
 A `PlatformKit` (`interface.py`) is everything suite builders need from a platform, hook by hook (tasks, expert,
 renderer, the streams the validity checks read, T3 sources, T4 scene edits, T5 primitives), and what the release
@@ -25,11 +25,13 @@ def kit(platform: str) -> PlatformKit:
 
 
 def _register_builtin() -> None:
+    from wsp_data.platforms.aloha.kit import KIT as ALOHA
     from wsp_data.platforms.libero.kit import KIT as LIBERO
     from wsp_data.platforms.maniskill.kit import KIT as MANISKILL
 
     KITS.register(MANISKILL.name, MANISKILL)
     KITS.register(LIBERO.name, LIBERO)
+    KITS.register(ALOHA.name, ALOHA)
 
 
 _register_builtin()
