@@ -19,7 +19,15 @@ logged() {
   "$@" >>"$LOG" 2>&1 || { printf '[wsp setup] error: step failed: %s\nlast lines of %s:\n' "$*" "$LOG" >&2
                           tail -n 25 "$LOG" >&2; exit 1; }
 }
-pip_q() { logged "$VENV/bin/python" -m pip "$@"; }
+# pip unpacks its downloads (torch and CUDA libraries: about 4 GB) in a temp folder on the venv's disk, not in a
+# possibly small /tmp, and keeps no second copy in its cache: the venv is the only copy needed.
+pip_q() { mkdir -p "$ROOT/.wsp-tmp"; TMPDIR="$ROOT/.wsp-tmp" logged "$VENV/bin/python" -m pip --no-cache-dir "$@"; }
+NEED_GB=12  # the venv takes 8.2 GB; pip needs room for the downloads on top
+
+free_space() {
+  local free; free="$(df -P -k "$ROOT" | awk 'NR==2 {print int($4 / 1048576)}')"
+  [ "$free" -ge "$NEED_GB" ] || die "only ${free} GB free on the disk of $ROOT; the Python environment needs about ${NEED_GB} GB (torch and its CUDA libraries are most of it): free some space and re-run"
+}
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; elif command -v sudo >/dev/null; then sudo "$@"; else die "need root for: $*"; fi; }
 
@@ -72,6 +80,7 @@ find_python() {
 python_env() {
   if [ -f "$STAMP" ] && [ "$(cat "$STAMP")" = "$KEY" ]; then return; fi
   local py; py="$(find_python)"
+  [ -x "$VENV/bin/python" ] || free_space
   [ -x "$VENV/bin/python" ] || { log "creating $VENV with $py"; logged "$py" -m venv "$VENV"; }
   log "installing pinned packages (first run downloads torch, a few minutes; pip's output: $LOG)"
   pip_q install --upgrade pip
