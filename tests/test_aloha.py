@@ -268,8 +268,12 @@ def test_oracle_scores_full_marks(aloha_release, tmp_path):
     write_baseline("oracle", aloha_release, sub, seeds=(0,))
     report = score_submission(sub, aloha_release, tmp_path / "report", progress=False)
     suites = report["platforms"]["aloha"]["suites"]
-    assert suites["t2"]["score"] == pytest.approx(100.0) and suites["t4"]["score"] == pytest.approx(100.0)
+    for suite in ("t2", "t3", "t4"):
+        assert suites[suite]["score"] == pytest.approx(100.0), suite
     assert suites["t1"]["score"] > 99.0  # r* is fixed on the simulator's frames; the stored video differs slightly
+    # T5 is the judge's agreement with ALOHA's references, not asserted: judge version 2 never saw ALOHA
+    # (docs/aloha.md); the score is computed, in range, and is what validity.md reports
+    assert 0.0 <= suites["t5"]["score"] <= 100.0
 
 
 def test_rebuild_is_byte_identical(aloha_release, tmp_path_factory):
