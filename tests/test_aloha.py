@@ -276,6 +276,17 @@ def test_oracle_scores_full_marks(aloha_release, tmp_path):
     assert 0.0 <= suites["t5"]["score"] <= 100.0
 
 
+def test_mask_baseline_writes_a_valid_submission_at_320x240(aloha_release, tmp_path):
+    """The baseline whose region depends on the robot mask's shape and the frame's sides (the robot's shape
+    moved aside), on a non-square camera; every baseline's scores on this release are in docs/aloha.md."""
+    name = "background_corrupt"
+    from wsp_eval.baselines import write_baseline
+    from wsp_eval.submission import validate
+
+    assert write_baseline(name, aloha_release, tmp_path / name, seeds=(0,)) > 0
+    assert validate(tmp_path / name, aloha_release) == []
+
+
 def test_rebuild_is_byte_identical(aloha_release, tmp_path_factory):
     out = build_tiny(tmp_path_factory, "t1", 2, ALOHA_TASKS, platform="aloha")
     digest = lambda folder: {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()  # noqa: E731
