@@ -79,7 +79,8 @@ class Hand:
     grip: float
 
 
-def _lerp(a: Hand, b: Hand, f: float) -> Hand:
+def lerp(a: Hand, b: Hand, f: float) -> Hand:
+    """The hand pose a fraction `f` of the way from `a` to `b` (position, pitch, roll and grip alike)."""
     return Hand(a.pos + f * (b.pos - a.pos), a.pitch + f * (b.pitch - a.pitch), a.roll + f * (b.roll - a.roll),
                 a.grip + f * (b.grip - a.grip))
 
@@ -142,7 +143,7 @@ class Script:
         for i in range(1, steps + 1):
             f = i / steps
             f = f * f * (3 - 2 * f)
-            self.hand = [_lerp(a, b, f) for a, b in zip(start, goal)]
+            self.hand = [lerp(a, b, f) for a, b in zip(start, goal)]
             self.act()
 
     def hold(self, steps: int) -> None:

@@ -102,7 +102,7 @@ class OperatorScript(Script):
             f = _smooth(i / steps)
             hands = []
             for a, b in zip(start, goal):
-                h = ax._lerp(a, b, f)
+                h = ax.lerp(a, b, f)
                 if bow is not None and not np.array_equal(a.pos, b.pos):  # quadratic Bézier through a bowed point
                     c = (a.pos + b.pos) / 2 + bow
                     h = replace(h, pos=(1 - f) ** 2 * a.pos + 2 * f * (1 - f) * c + f * f * b.pos)
@@ -118,7 +118,7 @@ class OperatorScript(Script):
         if any(moving) and steps >= s.get("min_move_steps", math.inf):
             if "stop_short" in s:  # stop short, idle, back off upward, complete the move
                 k = max(1, round(n * s["stop_short"]))
-                self._move([ax._lerp(a, b, s["stop_short"]) for a, b in zip(self.hand, goal)], k)
+                self._move([ax.lerp(a, b, s["stop_short"]) for a, b in zip(self.hand, goal)], k)
                 super().hold(s["idle"])
                 self._move([replace(h, pos=h.pos + [0, 0, s["back_off_m"]]) if m else h
                             for h, m in zip(self.hand, moving)], s["back_off_steps"])
@@ -186,15 +186,15 @@ def feature_names(task: str) -> list[str]:
 
 
 def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
-    from wsp_data.platforms.maniskill.policies import _rot6d
+    from wsp_data.platforms.maniskill.policies import rot6d
 
     tcp = np.asarray(observation.tcp_pose, dtype=np.float64)
     parts = [np.asarray(observation.qpos, dtype=np.float64)]
     for k in (0, 1):
-        parts += [tcp[7 * k:7 * k + 3], _rot6d(tcp[7 * k + 3:7 * k + 7])]
+        parts += [tcp[7 * k:7 * k + 3], rot6d(tcp[7 * k + 3:7 * k + 7])]
     for j in range(n_objects):
         pose = np.asarray(observation.object_poses[j], dtype=np.float64)
-        parts += [pose[:3], _rot6d(pose[3:]), pose[:3] - tcp[0:3], pose[:3] - tcp[7:10]]
+        parts += [pose[:3], rot6d(pose[3:]), pose[:3] - tcp[0:3], pose[:3] - tcp[7:10]]
     parts.append([step / ref_length])
     return np.concatenate(parts).astype(np.float32)
 

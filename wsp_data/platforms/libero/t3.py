@@ -135,13 +135,13 @@ def feature_names(task: str) -> list[str]:
 
 
 def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
-    from wsp_data.platforms.maniskill.policies import _rot6d
+    from wsp_data.platforms.maniskill.policies import rot6d
 
     ee = np.asarray(observation.tcp_pose, dtype=np.float64)
-    parts = [np.asarray(observation.qpos, dtype=np.float64), ee[:3], _rot6d(ee[3:])]
+    parts = [np.asarray(observation.qpos, dtype=np.float64), ee[:3], rot6d(ee[3:])]
     for k in range(n_objects):
         pose = np.asarray(observation.object_poses[k], dtype=np.float64)
-        parts += [pose[:3], _rot6d(pose[3:]), pose[:3] - ee[:3]]
+        parts += [pose[:3], rot6d(pose[3:]), pose[:3] - ee[:3]]
     parts.append([step / ref_length])
     return np.concatenate(parts).astype(np.float32)
 

@@ -52,7 +52,7 @@ def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) 
 
 
 # -- features ---------------------------------------------------------------------------------------
-def _rot6d(q) -> np.ndarray:
+def rot6d(q) -> np.ndarray:
     """A unit quaternion (wxyz) as the first two columns of its rotation matrix (continuous, sign-free)."""
     w, x, y, z = (float(v) for v in q)
     n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
@@ -82,12 +82,12 @@ def feature_names(task: str) -> list[str]:
 def features(task: str, observation, step: int, goal: np.ndarray | None, ref_length: float) -> np.ndarray:
     """The policy input of one observation (see the module docstring); NaN-padded object slots are dropped."""
     tcp = np.asarray(observation.tcp_pose, dtype=np.float64)
-    parts = [np.asarray(observation.qpos, dtype=np.float64)[:9], tcp[:3], _rot6d(tcp[3:7])]
+    parts = [np.asarray(observation.qpos, dtype=np.float64)[:9], tcp[:3], rot6d(tcp[3:7])]
     poses = np.nan_to_num(np.asarray(observation.object_poses, dtype=np.float64))
     for k in range(num_objects(task)):
         p = poses[k]
         q = p[3:7] if np.any(p[3:7]) else np.array([1.0, 0, 0, 0])
-        parts += [p[:3], _rot6d(q), p[:3] - tcp[:3]]
+        parts += [p[:3], rot6d(q), p[:3] - tcp[:3]]
     if task in GOAL_ATTR:
         if goal is None:
             raise ValueError(f"{task} policies need the episode's goal position")
