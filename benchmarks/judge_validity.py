@@ -52,7 +52,7 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                                  for k, f_ in DEGRADE.items()})
             for kind, fr in variants.items():
                 t = time.perf_counter()
-                v = judge.judge(fr, c.object_px)
+                v = judge.judge(fr, c.object_px, platform)
                 out[platform].append({"kind": kind, "instance_id": c.instance_id, "task": c.task, "seed": c.seed,
                                       "intended": c.primitive, "label": v.label, "agent_ok": v.agent_ok,
                                       "object_ok": v.object_ok, "seconds": time.perf_counter() - t})

@@ -13,6 +13,11 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
     .venv/bin/python scripts/train_judge.py judge-train judge-train2 judge-train3 judge-train-lb96 \
         --out wsp_eval/backends/weights/judge_net_v2.onnx
 
+    # ALOHA's own weights (version 3 judges ALOHA with them; ManiSkill and LIBERO keep version 2's)
+    wsp build --platform aloha --suite t5 --seed-range train --count 192 --workers 2 --out judge-train-aloha
+    wsp build --platform aloha --suite t4 --seed-range train --count 48  --workers 2 --out judge-train-aloha
+    .venv/bin/python scripts/train_judge.py judge-train-aloha --out wsp_eval/backends/weights/judge_net_v3_aloha.onnx
+
 Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
 the approach before first contact (object false), the robot held still while the object moves (agent false),
 and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
@@ -36,7 +41,7 @@ import torch
 from torch import nn
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
-from wsp_eval.backends.judge_net import CHANNELS, judge_input
+from wsp_eval.backends.judge_net import CHANNELS, FRAME, judge_input
 from wsp_eval.judge_data import DENSE, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON
 
@@ -133,9 +138,22 @@ def data_record(release: Path) -> dict:
             "seed_range": sorted({b.get("seed_range", "") for b in t5.values()})}
 
 
+def at_judge_size(clip: Clip) -> Clip:
+    """The clip's frames at the judge's FRAME×FRAME, resized as `judge_input` resizes them (so an unaugmented clip
+    gives the network the same input as at scoring time); augmentation then works at that size. A no-op on
+    128×128 references (ManiSkill, LIBERO); ALOHA's 320×240 frames become 6.6× cheaper to augment."""
+    h, w = clip.dense.shape[1:3]
+    if (h, w) != (FRAME, FRAME):
+        interp = cv2.INTER_AREA if min(h, w) > FRAME else cv2.INTER_LINEAR
+        clip.dense = np.stack([cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp)
+                               for f in clip.dense])
+    return clip
+
+
 def load_clips(releases: list[Path]) -> list[Clip]:
-    """Every T4/T5 clip of the releases; a clip found in more than one release (the same config, slot and scene
-    seed: a bigger build of the same config contains a smaller one's instances) is used once."""
+    """Every T4/T5 clip of the releases at the judge's frame size; a clip found in more than one release (the same
+    config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
+    once."""
     clips, seen = [], set()
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())
@@ -151,7 +169,7 @@ def load_clips(releases: list[Path]) -> list[Clip]:
             new = [c for c in found if (c.kind, c.instance_id, c.seed) not in seen]
             seen.update((c.kind, c.instance_id, c.seed) for c in new)
             print(f"{release}/{config}: {len(new)} clips ({len(found) - len(new)} already loaded)", flush=True)
-            clips += new
+            clips += [at_judge_size(c) for c in new]
     return clips
 
 
@@ -199,12 +217,15 @@ def main() -> None:
                     help="development only: hold out every K-th run of 8 consecutive slots (all primitives; training-range "
                          "seeds still) and print its "
                          "accuracy every 5 epochs; the shipped judge trains on every clip (K = 0)")
+    ap.add_argument("--exclude-tasks", nargs="+", default=[], metavar="TASK",
+                    help="development only: train without these tasks' clips (a leave-task-out check of how the judge "
+                         "does on tasks it never saw; docs/validity.md §1)")
     args = ap.parse_args()
     torch.manual_seed(SEED)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)
     cv2.setNumThreads(1)
-    clips = load_clips(args.releases)
+    clips = [c for c in load_clips(args.releases) if c.task not in args.exclude_tasks]
     if not clips:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
     held: list[Clip] = []
@@ -243,7 +264,8 @@ def main() -> None:
         "data": [data_record(r) for r in args.releases],
         "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
         "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
-        "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR, "weight_decay": WEIGHT_DECAY, "seed": SEED,
+        "excluded_tasks": args.exclude_tasks, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
+        "weight_decay": WEIGHT_DECAY, "seed": SEED,
         "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
         "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),
         "torch": torch.__version__, "opencv": cv2.__version__,

@@ -1,10 +1,11 @@
 """The learned T5 judge (`net`) on the shared tiny releases: test-range seeds, which no training clip comes from
 (the judge trains on `--seed-range train` builds only; its record says which).
 
-Tolerances: the judge's measured full agreement on fresh references is in docs/judge.md (≥ 95 % per platform on
-≥ 16 references per primitive); on the 12 tiny-release references here (8 ManiSkill, 4 LIBERO) we allow one
-miss, so the test fails when the judge is clearly worse than measured, not on a single borderline clip. The
-rejections (static, still objects, no robot) are required on every clip, as docs/judge.md reports them.
+Tolerances: the judge's measured full agreement on fresh references is in docs/validity.md §1 (≥ 95 % per
+platform on ≥ 16 references per primitive); on the 12 tiny-release references here (8 ManiSkill, 4 LIBERO) we
+allow one miss, so the test fails when the judge is clearly worse than measured, not on a single borderline clip.
+The rejections (static, still objects, no robot) are required on every clip, as docs/judge.md reports them.
+ALOHA's weights are checked on the ALOHA tiny release in tests/test_aloha.py (its oracle's T5 score).
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import numpy as np
 import pytest
 
 from wsp_eval.backends.judge import score_verdict
-from wsp_eval.backends.judge_net import CHANNELS, SIDE, WEIGHTS, NetJudge, judge_input
+from wsp_eval.backends.errors import BackendUnavailable
+from wsp_eval.backends.judge_net import CHANNELS, PLATFORM_WEIGHTS, SIDE, NetJudge, judge_input
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -34,28 +36,43 @@ def clips(suites_release, libero_release) -> list:
             + t4_clips(suites_release, "t4_maniskill") + t4_clips(libero_release, "t4_libero"))
 
 
-def test_the_packaged_weights_and_their_training_record():
-    record = json.loads(WEIGHTS.with_suffix(".json").read_text())
-    assert WEIGHTS.stat().st_size < 20e6
-    assert record["sha256"] == hashlib.sha256(WEIGHTS.read_bytes()).hexdigest()
+@pytest.mark.parametrize("platform", sorted(PLATFORM_WEIGHTS))
+def test_the_packaged_weights_and_their_training_record(platform):
+    weights = PLATFORM_WEIGHTS[platform]
+    record = json.loads(weights.with_suffix(".json").read_text())
+    assert weights.stat().st_size < 20e6
+    assert record["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
     assert record["onnx_vs_torch_max_abs_diff"] < 1e-3
     assert all("train" in d["seed_range"] for d in record["data"])  # training-range seeds only
+    trained_on = {c.split("_", 1)[1] for d in record["data"] for c in d["configs"]}
+    assert platform in trained_on  # each platform's weights saw that platform's clips
+
+
+def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
+    judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
+    assert judge.weights_for("aloha") != judge.weights_for("maniskill") == judge.weights_for("libero")
+    assert judge.version.startswith("3 (maniskill+libero ") and ", aloha " in judge.version
+    with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
+        judge.judge(frames, (64.0, 64.0), "robotwin")
+    custom = NetJudge(PLATFORM_WEIGHTS["aloha"])  # --judge-checkpoint: these weights judge every platform
+    assert custom.judge(frames, (64.0, 64.0), "robotwin") == judge.judge(frames, (64.0, 64.0), "aloha")
 
 
 def test_input_and_determinism(judge, clips):
     ref = next(c for c in clips if c.kind == "reference")
     x = judge_input(ref.judge_frames(), ref.object_px)
     assert x.shape == (1, CHANNELS, SIDE, SIDE) and x.dtype == np.float32
-    assert judge.judge(ref.judge_frames(), ref.object_px) == judge.judge(ref.judge_frames(), ref.object_px)
+    assert (judge.judge(ref.judge_frames(), ref.object_px, ref.platform)
+            == judge.judge(ref.judge_frames(), ref.object_px, ref.platform))
     up = np.repeat(np.repeat(ref.judge_frames(), 2, axis=1), 2, axis=2)  # a 256² model output: same input size
     assert judge_input(up, ref.object_px).shape == x.shape
-    assert judge.judge(ref.judge_frames()[:5], ref.object_px).label is None  # unreadable: scores 0, never raises
+    assert judge.judge(ref.judge_frames()[:5], ref.object_px, ref.platform).label is None  # unreadable: scores 0
 
 
 def test_references_score_100_and_negatives_are_rejected(judge, clips):
     by_kind: dict[str, list] = {}
     for c in clips:
-        by_kind.setdefault(c.kind, []).append((c, judge.judge(c.judge_frames(), c.object_px)))
+        by_kind.setdefault(c.kind, []).append((c, judge.judge(c.judge_frames(), c.object_px, c.platform)))
     refs = by_kind["reference"]
     full = [score_verdict(v, c.label) == 100.0 for c, v in refs]
     assert len(refs) == 12 and sum(full) >= len(refs) - 1, [(c.instance_id, c.label, v) for (c, v), ok in
@@ -71,7 +88,7 @@ def test_scoring_with_the_net_judge_needs_no_torch(tmp_path):
     import subprocess
 
     code = ("import sys, numpy as np; from wsp_eval.backends.judge_net import NetJudge; "
-            "v = NetJudge().judge(np.zeros((12, 128, 128, 3), np.uint8), (128.0, 128.0)); "
+            "v = NetJudge().judge(np.zeros((12, 128, 128, 3), np.uint8), (128.0, 128.0), 'aloha'); "
             "assert 'torch' not in sys.modules and 'onnx' not in sys.modules, sorted(sys.modules); print(v.label)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr

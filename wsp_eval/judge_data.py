@@ -51,6 +51,11 @@ class Clip:
     def judge_frames(self) -> np.ndarray:
         return self.dense[frame_indices(len(self.dense), JUDGE_FRAMES)]
 
+    @property
+    def platform(self) -> str:
+        """The config's platform (`t5_aloha` → `aloha`): which of the judge's weights judge this clip."""
+        return self.config.split("_", 1)[1]
+
 
 def _dense(frames: np.ndarray) -> np.ndarray:
     return np.asarray(frames)[frame_indices(len(frames), DENSE)]

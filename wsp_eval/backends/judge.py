@@ -2,10 +2,11 @@
 
 A judge sees `JUDGE_FRAMES` = 12 frames sampled uniformly over the generated clip (`sample_frames`), the
 frame-0 position of the evaluated object in the 256×256 scoring frame (the release stores it; every model
-shares frame 0), and the eight primitive specifications (`PRIMITIVE_SPECS`). It never sees the action
-stream, the intended label or the model's name. It returns a `Verdict`: one primitive label (None when its
-answer could not be parsed, which scores 0) and two booleans (agent motion matches the label's
-specification, object motion matches it).
+shares frame 0), the eight primitive specifications (`PRIMITIVE_SPECS`) and the platform the clip comes from
+(`maniskill`, `libero`, `aloha`: a property of the release's config, as the robot in the frames is; the learned
+judge keeps weights per platform). It never sees the action stream, the intended label or the model's name.
+It returns a `Verdict`: one primitive label (None when its answer could not be parsed, which scores 0) and two
+booleans (agent motion matches the label's specification, object motion matches it).
 """
 
 from __future__ import annotations
@@ -57,8 +58,9 @@ class Judge(Protocol):
     name: str
     version: str
 
-    def judge(self, frames: np.ndarray, object_px: tuple[float, float]) -> Verdict:
-        """`frames`: (12, H, W, 3) uint8 RGB; `object_px`: the object's frame-0 (x, y) in the 256² frame."""
+    def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
+        """`frames`: (12, H, W, 3) uint8 RGB; `object_px`: the object's frame-0 (x, y) in the 256² frame;
+        `platform`: the config's platform (a judge may ignore it)."""
 
 
 def frame_indices(num_frames: int, k: int = JUDGE_FRAMES) -> np.ndarray:

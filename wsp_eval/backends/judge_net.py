@@ -16,6 +16,10 @@ Outputs: 8 label logits (`PRIMITIVES` order), then the agent and object logits. 
 the clip and of its left–right mirror (every primitive is mirror-symmetric; training mirrors too), takes the
 most likely primitive, and a boolean is true when its probability is ≥ 0.5. Deterministic: OpenCV's dnn on one
 thread, fixed preprocessing.
+
+Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
+by the config's platform (never by anything in the submission). ManiSkill and LIBERO share version 2's weights;
+ALOHA (two arms, another camera and robot) has its own. A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
@@ -29,8 +33,10 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "2"
-WEIGHTS = Path(__file__).with_name("weights") / f"judge_net_v{VERSION}.onnx"
+NAME, VERSION = "net", "3"
+WEIGHTS_DIR = Path(__file__).with_name("weights")
+PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v2.onnx", "libero": WEIGHTS_DIR / "judge_net_v2.onnx",
+                    "aloha": WEIGHTS_DIR / "judge_net_v3_aloha.onnx"}
 FRAME, SIDE = 128, 64
 VIEWS = 3
 CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
@@ -84,24 +90,41 @@ def _net(path: str):
 
 
 class NetJudge:
-    """The learned judge; `weights` defaults to the checkpoint shipped with the package."""
+    """The learned judge: the packaged weights of each platform (`PLATFORM_WEIGHTS`), or `weights` for all."""
 
     name = NAME
 
     def __init__(self, weights: Path | str | None = None):
-        path = Path(weights) if weights else WEIGHTS
-        if not path.is_file():
-            raise BackendUnavailable(f"judge backend 'net': weights not found at {path}; reinstall the package, "
-                                     "or train them with `scripts/train_judge.py` (see docs/judge.md)")
-        self.path = path
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:12]
-        self.version = f"{VERSION} ({digest})"
+        paths = {p: Path(weights) for p in PLATFORM_WEIGHTS} if weights else dict(PLATFORM_WEIGHTS)
+        files = list(dict.fromkeys(paths.values()))  # in PLATFORM_WEIGHTS order: a stable version string
+        for path in files:
+            if not path.is_file():
+                raise BackendUnavailable(f"judge backend 'net': weights not found at {path}; reinstall the package, "
+                                         "or train them with `scripts/train_judge.py` (see docs/judge.md)")
+        self.paths = paths
+        digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
+        if weights:
+            self.version = f"{VERSION} ({digests[files[0]]})"
+        else:  # e.g. "3 (maniskill+libero 9b07580c2e2e, aloha 0123456789ab)"
+            self.version = f"{VERSION} (" + ", ".join(
+                "+".join(p for p in paths if paths[p] == f) + f" {d}" for f, d in digests.items()) + ")"
 
-    def logits(self, frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarray:
+    def weights_for(self, platform: str | None) -> Path:
+        """The weights that judge `platform`'s clips (one file for all when `weights` was given)."""
+        if len(set(self.paths.values())) == 1:  # custom weights: every platform
+            return next(iter(self.paths.values()))
+        if platform not in self.paths:
+            raise BackendUnavailable(f"judge backend 'net' has no weights for platform {platform!r} (it has: "
+                                     f"{', '.join(self.paths)}); train them with `scripts/train_judge.py` on that "
+                                     "platform's training-range T4/T5 builds and pass --judge-checkpoint "
+                                     "(docs/judge.md)")
+        return self.paths[platform]
+
+    def logits(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> np.ndarray:
         import cv2
 
         cv2.setNumThreads(1)
-        net = _net(str(self.path))
+        net = _net(str(self.weights_for(platform)))
         frames = np.asarray(frames)
         mirrored = (frames[:, :, ::-1], (255.0 - float(object_px[0]), float(object_px[1])))  # pixel centres at integers
         out = []
@@ -110,8 +133,11 @@ class NetJudge:
             out.append(np.asarray(net.forward()).reshape(-1))
         return np.mean(out, axis=0)
 
-    def judge(self, frames: np.ndarray, object_px: tuple[float, float]) -> Verdict:
+    def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
+        """One clip's verdict. An unreadable clip gets label None (scores 0; a judge never raises on a clip); a
+        platform without weights raises `BackendUnavailable` (a set-up problem, not the clip's)."""
+        self.weights_for(platform)
         try:
-            return verdict_of(self.logits(frames, object_px))
+            return verdict_of(self.logits(frames, object_px, platform))
         except Exception as e:  # noqa: BLE001 - an unreadable clip scores 0; a judge never raises (the contract)
             return Verdict(None, False, False, {"reason": f"{type(e).__name__}: {e}"})

@@ -155,8 +155,9 @@ class OpenAIJudge:
         self.max_retries = max_retries
         self.version = f"{model}@{self.base_url}"
 
-    def judge(self, frames: np.ndarray, object_px: tuple[float, float]) -> Verdict:
-        """Ask the served model about one clip's 12 frames; `object_px` is the frame-0 (x, y) in the 256² frame."""
+    def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
+        """Ask the served model about one clip's 12 frames; `object_px` is the frame-0 (x, y) in the 256² frame.
+        The prompt is the paper's, the same on every platform (`platform` is not used)."""
         frames = np.asarray(frames)
         if frames.ndim != 4 or frames.shape[0] != JUDGE_FRAMES or frames.shape[3] != 3 or frames.dtype != np.uint8:
             raise ValueError(f"expected ({JUDGE_FRAMES}, H, W, 3) uint8 frames, got {frames.shape} {frames.dtype}")

@@ -394,7 +394,8 @@ class RulesJudge:
     name = "rules"
     version = "1"
 
-    def judge(self, frames: np.ndarray, object_px: tuple[float, float]) -> Verdict:
+    def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
+        """One clip's verdict; the rules are the same on every platform (`platform` is not used)."""
         cv2.setNumThreads(1)  # one thread per scoring worker, like the DIS flow backend
         try:
             f = features(frames, object_px)

@@ -49,5 +49,10 @@ class InstanceReference:
         return load_or_compute(self.flow_cache, self.config_dir.name, self.episode(role), duration, compute)
 
     @property
+    def platform(self) -> str:
+        """The config's platform (`t5_aloha` → `aloha`)."""
+        return self.config_dir.name.split("_", 1)[1]
+
+    @property
     def fps(self) -> float:
         return float(self.row["fps"])

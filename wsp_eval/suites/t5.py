@@ -13,20 +13,20 @@ NEEDS = ("judge",)
 GROUP_BY, BALANCED = "primitive", True
 
 
-def _judge(frames, row: dict, judge) -> tuple[float, dict]:
-    verdict = judge.judge(sample_frames(frames), tuple(float(x) for x in row["object_pixel_256"]))
+def _judge(frames, row: dict, platform: str, judge) -> tuple[float, dict]:
+    verdict = judge.judge(sample_frames(frames), tuple(float(x) for x in row["object_pixel_256"]), platform)
     detail = {"label": verdict.label, "agent_ok": verdict.agent_ok, "object_ok": verdict.object_ok}
     return score_verdict(verdict, row["primitive"]), detail
 
 
 def prepare(ref, backends) -> dict:
-    score, detail = _judge(ref.frames("reference"), ref.row, backends.judge)
-    return {"row": ref.row, "reference": {"score": score, **detail}}
+    score, detail = _judge(ref.frames("reference"), ref.row, ref.platform, backends.judge)
+    return {"row": ref.row, "platform": ref.platform, "reference": {"score": score, **detail}}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
     frames, _ = videos["reference"]
-    return _judge(frames, prepared["row"], backends.judge)
+    return _judge(frames, prepared["row"], prepared["platform"], backends.judge)
 
 
 def groups(rows: list[dict]) -> list[str]:
