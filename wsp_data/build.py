@@ -234,13 +234,14 @@ def format_report(report: dict, max_rows: int = 6) -> str:
 
 
 # -- assembly -------------------------------------------------------------------------------------------
-def assemble(config: BuildConfig, out: Path, staging: Staging) -> dict:
+def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1) -> dict:
+    """Write the config from its decided slots (reading and encoding on `workers` threads), its build report and
+    the release-level files; then remove the staging."""
     records = [staging.read_slot(k) for k in range(config.count)]
     if not any(r.kept for r in records):
         raise BuildError(f"{config.name}: no proposal passed validation; see the drop reasons in "
                          f"{staging.root} (nothing was assembled)")
-    kept = ((r, staging.read_rollouts(r.slot, r.roles)) for r in records if r.kept)
-    write_config(out / config.name, config.name, config.platform, kept)
+    write_config(out / config.name, config.name, config.platform, staging.read_kept(records, workers), workers)
     report = build_report(config, records)
     (out / config.name / BUILD_REPORT).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     record_build(out, config.name, config.to_json())
@@ -283,7 +284,7 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
             bar.set_postfix(kept=kept, dropped=decided - kept, accept=f"{kept / max(1, proposed):.0%}")
         bar.close()
         remaining = sum(not staging.is_decided(k) for k in range(config.count))
-        report = assemble(config, out, staging) if remaining == 0 else None
+        report = assemble(config, out, staging, workers) if remaining == 0 else None
     return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
                        steps, report, log=log)
 

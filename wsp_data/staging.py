@@ -11,13 +11,18 @@ from __future__ import annotations
 import json
 import os
 import shutil
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
 from wsp_data.platforms import Rollout
 
+T, R = TypeVar("T"), TypeVar("R")
 SLOT_DIR = "slot_{slot:06d}"
 SLOT_JSON = "slot.json"
 CONFIG_JSON = "build_config.json"
@@ -109,10 +114,29 @@ class Staging:
     def read_rollouts(self, slot: int, roles: list[str]) -> list[RolloutArrays]:
         return [RolloutArrays.load(self.slot_dir(slot) / f"{role}.npz") for role in roles]
 
+    def read_kept(self, records: Iterable[SlotRecord],
+                  workers: int = 1) -> Iterator[tuple[SlotRecord, list[RolloutArrays]]]:
+        """(record, rollouts) of each kept record, in order, read by `workers` threads."""
+        kept = (r for r in records if r.kept)
+        return ordered_ahead(lambda r: (r, self.read_rollouts(r.slot, r.roles)), kept, workers)
+
     def clean_partial(self) -> None:
         """Remove slot folders a killed build left under a temporary name."""
         for p in self.root.glob("slot_*.tmp*"):
             shutil.rmtree(p, ignore_errors=True)
+
+
+def ordered_ahead(fn: Callable[[T], R], items: Iterable[T], workers: int) -> Iterator[R]:
+    """`map(fn, items)` run by `workers` threads (zlib, PNG and video codecs release the GIL), in order and at most
+    2·`workers` items ahead of the consumer, so memory stays bounded."""
+    with ThreadPoolExecutor(max(1, workers)) as pool:
+        pending: deque = deque()
+        for item in items:
+            pending.append(pool.submit(fn, item))
+            if len(pending) > 2 * workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
 
 
 def _jsonable(x):

@@ -4,17 +4,19 @@ own API (near-lossless h264 yuv444p crf 0 video), `wsp.*` episode columns in its
 instance).
 
 Writes are deterministic (same staged input → byte-identical files) and atomic per config: the dataset is
-written beside its final place and swapped in when complete.
+written beside its final place and swapped in when complete. LeRobot appends each episode's video to its
+file by re-muxing the whole file, quadratic in episodes per file; so it writes one video file per episode here,
+and `_pack_videos` joins them into files of LeRobot's default size, each muxed once (linear).
 """
 
 from __future__ import annotations
 
 import contextlib
-import glob
 import io
 import json
 import logging
 import shutil
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -26,9 +28,12 @@ from wsp_data.schema import (
     CONTACTS_KEY, EPISODE_ID, INSTANCES, MASK_COLUMN, OBJECT_POSES_KEY, ROBOT_MASKS, SOURCE_ROLE, PlatformInfo,
     frame_features,
 )
-from wsp_data.staging import RolloutArrays, SlotRecord
+from wsp_data.staging import RolloutArrays, SlotRecord, ordered_ahead
 
 REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
+EPISODE_TABLES = "meta/episodes/*/*.parquet"  # LeRobot's episode table files
+ONE_EPISODE_PER_FILE = 1e-9  # a video file size limit (MB) every episode exceeds: LeRobot starts a new file for each
+Instance = tuple[SlotRecord, list[RolloutArrays]]  # a kept slot and its rollouts
 TRAIN_SPLIT, TEST_SPLIT = "train", "test"  # LeRobot info.json `splits`: training configs, scored configs
 
 
@@ -50,8 +55,9 @@ def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
 
 
 def write_config(config_dir: Path, config: str, platform: str,
-                 instances: list[tuple[SlotRecord, list[RolloutArrays]]]) -> int:
-    """Write `config_dir` from kept slots (in slot order); returns the number of episodes written."""
+                 instances: Iterable[Instance], workers: int = 1) -> int:
+    """Write `config_dir` from kept slots (in slot order); returns the number of episodes written. `workers`
+    threads write LeRobot's frame images and encode the robot masks ahead of the writer."""
     from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -62,20 +68,21 @@ def write_config(config_dir: Path, config: str, platform: str,
     ds = LeRobotDataset.create(
         f"worldsimprobe/{config}", fps=info.fps, features=frame_features(info), root=tmp,
         robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
+        video_files_size_in_mb=ONE_EPISODE_PER_FILE, image_writer_threads=workers,
     )
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
     with contextlib.closing(_MaskWriter(tmp / ROBOT_MASKS)) as masks:  # closed also when a step below raises
-        for record, rollouts in instances:
+        for record, rollouts, pngs in ordered_ahead(_with_mask_pngs, instances, workers):
             row = dict(record.row)
             indices = []
-            for r in rollouts:
+            for r, r_pngs in zip(rollouts, pngs, strict=True):
                 index = len(episode_rows)
                 with contextlib.redirect_stderr(io.StringIO()):
                     for frame in _frames(r, row["instruction"], info):
                         ds.add_frame(frame)
                     ds.save_episode(parallel_encoding=False)
-                masks.add(index, r.mask)
+                masks.add(index, r_pngs)
                 indices.append(index)
                 episode_rows.append({
                     "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
@@ -100,7 +107,9 @@ def write_config(config_dir: Path, config: str, platform: str,
                 row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
             instance_rows.append(row)
         ds.finalize()
-    _set_split(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
+    for row, video in zip(episode_rows, _pack_videos(tmp, info.video_key), strict=True):
+        row.update(video)
+    _set_info(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
     _drop_fingerprints(tmp)
     _append_episode_columns(tmp, episode_rows)
     _canonicalize_json(tmp / "meta" / "stats.json")
@@ -108,6 +117,19 @@ def write_config(config_dir: Path, config: str, platform: str,
     shutil.rmtree(config_dir, ignore_errors=True)
     tmp.rename(config_dir)
     return len(episode_rows)
+
+
+def _with_mask_pngs(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[list[bytes]]]:
+    """The instance with each rollout's label masks as PNG files (`robot_masks.parquet`'s cells)."""
+    from PIL import Image
+
+    def png(m: np.ndarray) -> bytes:
+        buf = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
+        return buf.getvalue()
+
+    record, rollouts = instance
+    return record, rollouts, [[png(m) for m in r.mask] for r in rollouts]
 
 
 class _MaskWriter:
@@ -120,15 +142,8 @@ class _MaskWriter:
         self.writer = pq.ParquetWriter(path, self.SCHEMA)
         self.next_index = 0
 
-    def add(self, episode_index: int, masks: np.ndarray) -> None:
-        from PIL import Image
-
-        n = len(masks)
-        pngs = []
-        for m in masks:
-            buf = io.BytesIO()
-            Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
-            pngs.append(buf.getvalue())
+    def add(self, episode_index: int, pngs: list[bytes]) -> None:
+        n = len(pngs)
         self.writer.write_table(pa.table({
             "index": np.arange(self.next_index, self.next_index + n, dtype=np.int64),
             "episode_index": np.full(n, episode_index, dtype=np.int64), "frame_index": np.arange(n, dtype=np.int64),
@@ -139,20 +154,58 @@ class _MaskWriter:
         self.writer.close()
 
 
+def _pack_videos(root: Path, key: str) -> list[dict]:
+    """Join the one-episode video files of `key` into files of up to LeRobot's default size (a new file when the
+    next episode would reach it, as LeRobot does), each muxed in one pass; returns every episode's new
+    `videos/<key>/*` columns, in episode order."""
+    from lerobot.datasets.utils import DEFAULT_VIDEO_FILE_SIZE_IN_MB, DEFAULT_VIDEO_PATH, update_chunk_file_indices
+    from lerobot.datasets.video_utils import concatenate_video_files
+
+    def path(base: Path, chunk: int, file: int) -> Path:
+        return base / DEFAULT_VIDEO_PATH.format(video_key=key, chunk_index=chunk, file_index=file)
+
+    col = f"videos/{key}/"
+    names = ["episode_index", col + "chunk_index", col + "file_index", col + "to_timestamp"]
+    table = pa.concat_tables(pq.read_table(p).select(names) for p in sorted(root.glob(EPISODE_TABLES)))
+    loose = root / ".videos-per-episode"
+    loose.mkdir()
+    (root / "videos").rename(loose / "videos")
+    chunks_size = json.loads((root / "meta" / "info.json").read_text())["chunks_size"]
+    chunk, file, size, group, columns = 0, 0, 0.0, [], []
+    for _, src_chunk, src_file, duration in sorted(zip(*table.to_pydict().values())):  # in episode order
+        src = path(loose, src_chunk, src_file)
+        mb = src.stat().st_size / 1024**2
+        if group and size + mb >= DEFAULT_VIDEO_FILE_SIZE_IN_MB:
+            concatenate_video_files(group, path(root, chunk, file))
+            chunk, file = update_chunk_file_indices(chunk, file, chunks_size)
+            group, size = [], 0.0
+        start = columns[-1][col + "to_timestamp"] if group else 0.0
+        group.append(src)
+        size += mb
+        columns.append({col + "chunk_index": chunk, col + "file_index": file, col + "from_timestamp": start,
+                        col + "to_timestamp": start + duration})
+    concatenate_video_files(group, path(root, chunk, file))
+    shutil.rmtree(loose)
+    return columns
+
+
 def _append_episode_columns(root: Path, rows: list[dict]) -> None:
-    """Add the `wsp.*` episode-level fields to LeRobot's meta/episodes parquet files."""
-    for path in sorted(glob.glob(str(root / "meta" / "episodes" / "*" / "*.parquet"))):
+    """Set the `wsp.*` episode-level fields and the packed video columns in LeRobot's meta/episodes files."""
+    for path in sorted(root.glob(EPISODE_TABLES)):
         table = pq.read_table(path)
         eps = table.column("episode_index").to_pylist()
         for key in rows[0] if rows else ():
-            table = table.append_column(key, pa.array([rows[e][key] for e in eps]))
+            values = pa.array([rows[e][key] for e in eps])
+            i = table.schema.get_field_index(key)
+            table = (table.append_column(key, values) if i < 0
+                     else table.set_column(i, key, values.cast(table.schema.field(i).type)))
         pq.write_table(table, path)
 
 
 def _drop_fingerprints(root: Path) -> None:
     """`datasets` stores a fingerprint derived from the output path in each data file's metadata; drop it so
     the same build written to another folder is byte-identical."""
-    for path in sorted(glob.glob(str(root / "data" / "*" / "*.parquet"))):
+    for path in sorted(root.glob("data/*/*.parquet")):
         table = pq.read_table(path)
         meta = dict(table.schema.metadata or {})
         if b"huggingface" in meta:
@@ -162,10 +215,14 @@ def _drop_fingerprints(root: Path) -> None:
             pq.write_table(table.replace_schema_metadata(meta), path)
 
 
-def _set_split(info_path: Path, split: str) -> None:
-    """LeRobot names every episode `train`; a test config's episodes are the `test` split (the card says so too)."""
+def _set_info(info_path: Path, split: str) -> None:
+    """LeRobot names every episode `train`; a test config's episodes are the `test` split (the card says so too).
+    The video files were packed to LeRobot's default size."""
+    from lerobot.datasets.utils import DEFAULT_VIDEO_FILE_SIZE_IN_MB
+
     info = json.loads(info_path.read_text())
     info["splits"] = {split: f"0:{info['total_episodes']}"}
+    info["video_files_size_in_mb"] = DEFAULT_VIDEO_FILE_SIZE_IN_MB
     info_path.write_text(json.dumps(info, indent=4))
 
 

@@ -1,0 +1,68 @@
+"""The config writer on synthetic rollouts (no simulator, seconds): one-episode video files packed into LeRobot's
+files in one pass each, frames where LeRobot looks for them, and byte-identical output whatever the folder and
+the number of workers (issue #14)."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wsp_data.platforms import kit
+from wsp_data.staging import RolloutArrays, SlotRecord
+from wsp_data.writer import write_config
+
+PLATFORM, FRAMES = "aloha", 12
+
+
+def _rollout(role: str, seed: int) -> RolloutArrays:
+    info = kit(PLATFORM).info
+    t = np.arange(FRAMES)[:, None, None]
+    y, x = np.mgrid[:info.height, :info.width]
+    rgb = np.stack(np.broadcast_arrays((x + 7 * t + seed) % 256, (y + 3 * t) % 256, (x + y + 11 * seed) % 256), -1)
+    mask = ((x + t) % 64 < 20).astype(np.uint8)
+    state = np.random.default_rng(seed).normal(size=(FRAMES, 14)).astype(np.float32)
+    return RolloutArrays(role, seed, rgb.astype(np.uint8), mask, state, state, np.zeros((FRAMES, 4, 7), np.float32),
+                         np.zeros((FRAMES, 4), bool), np.arange(FRAMES) == FRAMES - 1, state[1:], state[1:],
+                         np.eye(3, dtype=np.float32), np.eye(3, 4, dtype=np.float32))
+
+
+def _instances() -> list[tuple[SlotRecord, list[RolloutArrays]]]:
+    roles = ["reference", "source"]
+    return [(SlotRecord(k, row={"instance_id": f"t4_aloha/{k}", "suite": "t4", "task": "transfer_cube",
+                                "source": "expert", "instruction": "move the cube", "objects": ["cube"]}, roles=roles),
+             [_rollout(role, 10 * k + i) for i, role in enumerate(roles)]) for k in range(3)]
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_same_input_gives_the_same_bytes_in_any_folder_with_any_workers(tmp_path):
+    for name, workers in (("a", 1), ("b", 2)):
+        assert write_config(tmp_path / name / "t4_aloha", "t4_aloha", PLATFORM, _instances(), workers) == 6
+    assert _digest(tmp_path / "a") == _digest(tmp_path / "b")
+    assert not list((tmp_path / "a").rglob("*.writing"))
+
+
+@pytest.mark.parametrize("file_mb", [None, 1e-9])  # LeRobot's default: one video file; tiny: one file per episode
+def test_packed_videos_hold_every_frame_where_lerobot_looks(tmp_path, monkeypatch, file_mb):
+    import lerobot.datasets.utils
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    if file_mb:
+        monkeypatch.setattr(lerobot.datasets.utils, "DEFAULT_VIDEO_FILE_SIZE_IN_MB", file_mb)
+    instances = _instances()
+    write_config(tmp_path / "t4_aloha", "t4_aloha", PLATFORM, instances, workers=2)
+    ds = LeRobotDataset("worldsimprobe/t4_aloha", root=tmp_path / "t4_aloha")
+    files = sorted((tmp_path / "t4_aloha" / "videos").rglob("*.mp4"))
+    assert len(files) == (6 if file_mb else 1) and ds.meta.total_episodes == 6 and len(ds) == 6 * FRAMES
+    rollouts = [r for _, rs in instances for r in rs]
+    for episode, frame in ((0, 0), (3, 5), (5, FRAMES - 1)):
+        item = ds[episode * FRAMES + frame]
+        assert int(item["episode_index"]) == episode and int(item["frame_index"]) == frame
+        decoded = (item[kit(PLATFORM).info.video_key].numpy().transpose(1, 2, 0) * 255).round()
+        assert np.abs(decoded - rollouts[episode].rgb[frame]).max() <= 3  # yuv444p crf 0: near lossless
