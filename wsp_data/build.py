@@ -234,14 +234,18 @@ def format_report(report: dict, max_rows: int = 6) -> str:
 
 
 # -- assembly -------------------------------------------------------------------------------------------
-def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1) -> dict:
-    """Write the config from its decided slots (reading and encoding on `workers` threads), its build report and
-    the release-level files; then remove the staging."""
+def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1, progress: bool = False) -> dict:
+    """Write the config from its decided slots (reading and encoding on `workers` threads; a bar of instances
+    written when `progress`), its build report and the release-level files; then remove the staging."""
     records = [staging.read_slot(k) for k in range(config.count)]
-    if not any(r.kept for r in records):
+    kept = sum(r.kept for r in records)
+    if not kept:
         raise BuildError(f"{config.name}: no proposal passed validation; see the drop reasons in "
                          f"{staging.root} (nothing was assembled)")
-    write_config(out / config.name, config.name, config.platform, staging.read_kept(records, workers), workers)
+    instances = tqdm(staging.read_kept(records, workers), total=kept, desc=f"write {config.name}", unit="instance",
+                     disable=not progress, file=terminal())
+    with instances:
+        write_config(out / config.name, config.name, config.platform, instances, workers)
     report = build_report(config, records)
     (out / config.name / BUILD_REPORT).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     record_build(out, config.name, config.to_json())
@@ -284,7 +288,7 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
             bar.set_postfix(kept=kept, dropped=decided - kept, accept=f"{kept / max(1, proposed):.0%}")
         bar.close()
         remaining = sum(not staging.is_decided(k) for k in range(config.count))
-        report = assemble(config, out, staging, workers) if remaining == 0 else None
+        report = assemble(config, out, staging, workers, progress) if remaining == 0 else None
     return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
                        steps, report, log=log)
 
