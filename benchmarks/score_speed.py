@@ -23,7 +23,7 @@ import pyarrow.parquet as pq
 from wsp_eval import backends as registry
 from wsp_eval.backends import BackendSpec
 from wsp_eval.reference import reference_frames
-from wsp_eval.score import split_config
+from wsp_eval.release_format import split_config
 from wsp_eval.submission import VIDEO_NAME, test_configs
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference

@@ -41,7 +41,7 @@ import torch
 from torch import nn
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
-from wsp_eval.backends.judge_net import CHANNELS, FRAME, judge_input
+from wsp_eval.backends.judge_net import CHANNELS, FRAME, at_frame_size, judge_input
 from wsp_eval.judge_data import DENSE, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON
 
@@ -142,11 +142,8 @@ def at_judge_size(clip: Clip) -> Clip:
     """The clip's frames at the judge's FRAME×FRAME, resized as `judge_input` resizes them (so an unaugmented clip
     gives the network the same input as at scoring time); augmentation then works at that size. A no-op on
     128×128 references (ManiSkill, LIBERO); ALOHA's 320×240 frames become 6.6× cheaper to augment."""
-    h, w = clip.dense.shape[1:3]
-    if (h, w) != (FRAME, FRAME):
-        interp = cv2.INTER_AREA if min(h, w) > FRAME else cv2.INTER_LINEAR
-        clip.dense = np.stack([cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp)
-                               for f in clip.dense])
+    if clip.dense.shape[1:3] != (FRAME, FRAME):
+        clip.dense = np.stack(at_frame_size(clip.dense))
     return clip
 
 

@@ -24,7 +24,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, frame_indices
-from wsp_eval.release_format import INSTANCES
+from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.suites.reference import InstanceReference
 
 DENSE = 2 * JUDGE_FRAMES
@@ -54,7 +54,7 @@ class Clip:
     @property
     def platform(self) -> str:
         """The config's platform (`t5_aloha` → `aloha`): which of the judge's weights judge this clip."""
-        return self.config.split("_", 1)[1]
+        return split_config(self.config)[1]
 
 
 def _dense(frames: np.ndarray) -> np.ndarray:

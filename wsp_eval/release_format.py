@@ -63,6 +63,12 @@ class ReleaseError(RuntimeError):
     """A folder that is not (or not yet) a readable WorldSimProbe release."""
 
 
+def split_config(config: str) -> tuple[str, str]:
+    """A config name's suite and platform (`t5_aloha` → `("t5", "aloha")`)."""
+    suite, platform = config.split("_", 1)
+    return suite, platform
+
+
 def load_release(root: Path) -> dict:
     """The parsed `release.json` of `root`, or ReleaseError saying why there is none."""
     path = Path(root) / RELEASE_JSON

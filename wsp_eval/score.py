@@ -41,7 +41,7 @@ from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
-from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release
+from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release, split_config
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
@@ -74,11 +74,6 @@ class Job:
     seeds: tuple[int, ...]
     accept_lossy: bool = False
     flow_cache: str | None = None  # the release's reference-flow cache folder (`wsp_eval.flow_cache`), if used
-
-
-def split_config(config: str) -> tuple[str, str]:
-    suite, platform = config.split("_", 1)
-    return suite, platform
 
 
 # -- one instance -----------------------------------------------------------------------------------------------

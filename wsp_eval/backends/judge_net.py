@@ -43,6 +43,15 @@ CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
 MARK_SIGMA = 2.0
 
 
+def at_frame_size(frames: np.ndarray) -> list[np.ndarray]:
+    """Each RGB frame at the judge's FRAME×FRAME (area-averaged when larger, bilinear when smaller)."""
+    import cv2
+
+    h, w = np.asarray(frames).shape[1:3]
+    interp = cv2.INTER_AREA if min(h, w) > FRAME else cv2.INTER_LINEAR
+    return [cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp) for f in frames]
+
+
 def judge_input(frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarray:
     """The network's input for 12 RGB uint8 frames (12, H, W, 3) and the object's frame-0 (x, y) in the 256²
     scoring frame."""
@@ -51,9 +60,7 @@ def judge_input(frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarra
     frames = np.asarray(frames)
     if frames.ndim != 4 or frames.shape[0] != JUDGE_FRAMES or frames.shape[-1] != 3:
         raise ValueError(f"expected ({JUDGE_FRAMES}, H, W, 3) frames, got {frames.shape}")
-    h, w = frames.shape[1:3]
-    interp = cv2.INTER_AREA if min(h, w) > FRAME else cv2.INTER_LINEAR
-    full = [cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp) for f in frames]
+    full = at_frame_size(frames)
     cx, cy = (float(v) * FRAME / 256.0 for v in object_px)
     glob = np.stack([cv2.resize(f, (SIDE, SIDE), interpolation=cv2.INTER_AREA) for f in full])
     local = np.stack([cv2.getRectSubPix(f, (SIDE, SIDE), (cx, cy)) for f in full])
@@ -95,30 +102,29 @@ class NetJudge:
     name = NAME
 
     def __init__(self, weights: Path | str | None = None):
-        paths = {p: Path(weights) for p in PLATFORM_WEIGHTS} if weights else dict(PLATFORM_WEIGHTS)
-        files = list(dict.fromkeys(paths.values()))  # in PLATFORM_WEIGHTS order: a stable version string
+        self.weights = Path(weights) if weights else None  # given: these weights judge every platform
+        files = [self.weights] if self.weights else list(dict.fromkeys(PLATFORM_WEIGHTS.values()))
         for path in files:
             if not path.is_file():
                 raise BackendUnavailable(f"judge backend 'net': weights not found at {path}; reinstall the package, "
                                          "or train them with `scripts/train_judge.py` (see docs/judge.md)")
-        self.paths = paths
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
-        if weights:
-            self.version = f"{VERSION} ({digests[files[0]]})"
-        else:  # e.g. "3 (maniskill+libero 9b07580c2e2e, aloha 0123456789ab)"
-            self.version = f"{VERSION} (" + ", ".join(
-                "+".join(p for p in paths if paths[p] == f) + f" {d}" for f, d in digests.items()) + ")"
+        if self.weights:
+            self.version = f"{VERSION} ({digests[self.weights]})"
+        else:  # in PLATFORM_WEIGHTS order, e.g. "3 (maniskill+libero 9b07580c2e2e, aloha 0123456789ab)"
+            named = ("+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {d}" for path, d in digests.items())
+            self.version = f"{VERSION} ({', '.join(named)})"
 
     def weights_for(self, platform: str | None) -> Path:
-        """The weights that judge `platform`'s clips (one file for all when `weights` was given)."""
-        if len(set(self.paths.values())) == 1:  # custom weights: every platform
-            return next(iter(self.paths.values()))
-        if platform not in self.paths:
+        """The weights that judge `platform`'s clips (the given `weights` for every platform)."""
+        if self.weights:
+            return self.weights
+        if platform not in PLATFORM_WEIGHTS:
             raise BackendUnavailable(f"judge backend 'net' has no weights for platform {platform!r} (it has: "
-                                     f"{', '.join(self.paths)}); train them with `scripts/train_judge.py` on that "
-                                     "platform's training-range T4/T5 builds and pass --judge-checkpoint "
+                                     f"{', '.join(PLATFORM_WEIGHTS)}); train them with `scripts/train_judge.py` on "
+                                     "that platform's training-range T4/T5 builds and pass --judge-checkpoint "
                                      "(docs/judge.md)")
-        return self.paths[platform]
+        return PLATFORM_WEIGHTS[platform]
 
     def logits(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> np.ndarray:
         import cv2

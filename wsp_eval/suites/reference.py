@@ -10,6 +10,7 @@ import numpy as np
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
 from wsp_eval.reference import reference_frames, reference_masks
+from wsp_eval.release_format import split_config
 
 
 @dataclass
@@ -51,7 +52,7 @@ class InstanceReference:
     @property
     def platform(self) -> str:
         """The config's platform (`t5_aloha` → `aloha`)."""
-        return self.config_dir.name.split("_", 1)[1]
+        return split_config(self.config_dir.name)[1]
 
     @property
     def fps(self) -> float:
