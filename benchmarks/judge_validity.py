@@ -27,7 +27,7 @@ import numpy as np
 from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES
 from wsp_eval.judge_data import t4_clips, t5_clips
-from wsp_eval.release_format import RELEASE_JSON
+from wsp_eval.release_format import RELEASE_JSON, split_config
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
 DEGRADE = {
@@ -42,7 +42,7 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     meta = json.loads((release / RELEASE_JSON).read_text())
     out: dict[str, list[dict]] = defaultdict(list)
     for config in sorted(meta["configs"]):
-        suite, platform = config.split("_", 1)
+        suite, platform = split_config(config)
         clips = t5_clips(release, config) if suite == "t5" else t4_clips(release, config) if suite == "t4" else []
         for c in clips:
             frames = c.judge_frames()

@@ -34,7 +34,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.reference import episodes, reference_frames
-from wsp_eval.release_format import INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON
+from wsp_eval.release_format import INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON, split_config
 from wsp_eval.suites.reference import InstanceReference
 from wsp_eval.tracking import (GATE_RATIO, MOTION_MAX, TRACKED_RATIO, colour_model, frame_size, motion_gate,
                                object_path, project, scoring_video, t4_score)
@@ -112,7 +112,7 @@ def main() -> None:
     records: dict[str, list[dict]] = defaultdict(list)
     for release in args.releases:
         for config in sorted(json.loads((release / RELEASE_JSON).read_text())["configs"]):
-            suite, platform = config.split("_", 1)
+            suite, platform = split_config(config)
             if suite not in ("t4", "t5"):
                 continue
             for row in pq.read_table(release / config / INSTANCES).to_pylist():

@@ -43,7 +43,7 @@ from torch import nn
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
 from wsp_eval.backends.judge_net import CHANNELS, FRAME, at_frame_size, judge_input
 from wsp_eval.judge_data import DENSE, Clip, t4_clips, t5_clips
-from wsp_eval.release_format import RELEASE_JSON
+from wsp_eval.release_format import RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
 T4_REPEAT = 4  # T4 still-object clips are few (one per T4 reference) and the hardest negatives: each epoch sees
@@ -132,7 +132,7 @@ def loss_of(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
 
 def data_record(release: Path) -> dict:
     meta = json.loads((release / RELEASE_JSON).read_text())
-    t5 = {c: i["build_config"] for c, i in sorted(meta["configs"].items()) if c.split("_", 1)[0] in ("t4", "t5")}
+    t5 = {c: i["build_config"] for c, i in sorted(meta["configs"].items()) if split_config(c)[0] in ("t4", "t5")}
     return {"release": release.name, "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest(),
             "configs": {c: {k: b[k] for k in ("count", "seed", "tasks")} for c, b in t5.items()},
             "seed_range": sorted({b.get("seed_range", "") for b in t5.values()})}
@@ -155,7 +155,7 @@ def load_clips(releases: list[Path]) -> list[Clip]:
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())
         for config, info in sorted(meta["configs"].items()):
-            suite = config.split("_", 1)[0]
+            suite = split_config(config)[0]
             if suite not in ("t4", "t5"):
                 continue
             seed_range = info["build_config"].get("seed_range")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wsp_eval.release_format import split_config
 from wsp_eval.score import bootstrap_means
 from wsp_eval.suites import SCORERS
 
@@ -91,7 +92,7 @@ def _suite_diffs(a: Entry, b: Entry, config: str, rng: np.random.Generator) -> n
     if len(shared) < 2:
         return None
     d = np.array([sa[i][0] - sb[i][0] for i in shared])
-    balanced = SCORERS[config.split("_", 1)[0]].BALANCED
+    balanced = SCORERS[split_config(config)[0]].BALANCED
     return bootstrap_means(d, [sa[i][1] for i in shared] if balanced else None, rng, BOOTSTRAP)
 
 

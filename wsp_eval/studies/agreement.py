@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from wsp_eval.release_format import split_config
+
 BOOTSTRAP = 2000
 HUMAN_THRESHOLD = 3.0
 
@@ -92,7 +94,7 @@ def agreement(ratings: list[dict], scores: dict[tuple, float], threshold: float 
         if key not in scores:
             unmatched += 1
             continue
-        rows.append({"suite": config.split("_", 1)[0], "config": config, "score": scores[key],
+        rows.append({"suite": split_config(config)[0], "config": config, "score": scores[key],
                      "rating": float(np.mean(list(by_annotator.values()))), "ratings": by_annotator})
     if not rows:
         raise AgreementError(f"none of the {len(per_item)} rated rollouts has a score in the reports given (their "

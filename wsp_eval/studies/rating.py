@@ -31,7 +31,7 @@ import pyarrow.parquet as pq
 
 from wsp_eval.local_http import JsonRequestHandler
 from wsp_eval.reference import reference_frames
-from wsp_eval.release_format import INSTANCES, load_release
+from wsp_eval.release_format import INSTANCES, load_release, split_config
 from wsp_eval.submission import SUBMISSION_JSON, Expected
 from wsp_eval.video import VideoError, read_video
 
@@ -82,7 +82,7 @@ def collect_items(release: Path, submissions: list[Path], suites: tuple[str, ...
                   seeds: tuple[int, ...] = (0,), per_config: int | None = None) -> tuple[list[Item], list[str]]:
     """Every (submission, instance, seed) of the suites' configs whose generated video exists (the first
     `per_config` instances of each config by id when given), and a line per video left out."""
-    configs = sorted(c for c in load_release(release)["configs"] if c.split("_", 1)[0] in suites)
+    configs = sorted(c for c in load_release(release)["configs"] if split_config(c)[0] in suites)
     if not configs:
         raise RatingError(f"{release}: no config of suite(s) {', '.join(suites)}")
     items, skipped = [], []
