@@ -227,6 +227,29 @@ def test_a_grasped_cube_half_covered_by_the_fingers_is_still_followed():
     assert m.displacement == pytest.approx(24, abs=2) and m.visible_fraction == 1.0
 
 
+def test_fingers_over_a_still_cube_do_not_move_it():
+    """A hand covers the top 4 of the still cube's 7 rows from frame 3 on: the visible bottom rows' centroid
+    sits 2 px low, but the occlusion fit places the cube's frame-0 shape where it covers them without lying
+    on the (unchanged) wood below: d = 0 exactly (the fit is on the integer grid)."""
+    n = 8
+    frames = colour_scene(n, lambda t: CUBE_AT,
+                          hand_at_=lambda t: (CUBE_AT[0], CUBE_AT[1] - 7) if t >= 3 else (200, 40), hand_size=16)
+    m = tr.object_motion(tr.scoring_video(frames), np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement < 0.1 and m.visible_fraction == 1.0
+
+
+def test_a_cube_lifted_under_fingers_moves_by_its_true_lift():
+    """The fingers close over the cube's top 4 rows and lift it 12 px (1 px per frame): the visible part's
+    centroid would read 10 px (2 px low); the fit places the whole cube: d = 12 (docs/validity.md §2: ALOHA's
+    drops, lifted 12.5 px, read 7–10 px before the fit)."""
+    n = 14
+    path = lambda t: (CUBE_AT[0], CUBE_AT[1] - max(t - 1, 0))  # noqa: E731
+    frames = colour_scene(n, path, hand_at_=lambda t: (path(t)[0], path(t)[1] - 7) if t else (200, 40),
+                          hand_size=16)
+    m = tr.object_motion(tr.scoring_video(frames), np.array(CUBE_AT, float), far_hand_mask())
+    assert m.displacement == pytest.approx(12, abs=0.1) and m.visible_fraction == 1.0
+
+
 def test_a_hidden_cube_is_invisible_and_keeps_its_place():
     """A still cube covered entirely by a passing hand in frames 4–8: invisible there (the occlusion rule),
     its last position kept, so d ≈ 0 and the visible fraction is 9/14."""

@@ -47,10 +47,11 @@ from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
-SCORING_VERSION = 4  # what the scores mean, in the report and the resume cache's key (a cache of an older version
+SCORING_VERSION = 5  # what the scores mean, in the report and the resume cache's key (a cache of an older version
 #   is discarded): bump it with every metric change. 2: T4's colour-region object tracker (docs/validity.md §2);
 #   3: T5's learned judge version 2, trained with twice the LIBERO references (docs/validity.md §1);
-#   4: T5's judge version 3: ALOHA's clips judged by weights trained on ALOHA (ManiSkill and LIBERO unchanged)
+#   4: T5's judge version 3: ALOHA's clips judged by weights trained on ALOHA (ManiSkill and LIBERO unchanged);
+#   5: T4's colour region places a partly hidden object by an occlusion-aware fit (docs/validity.md §2)
 BOOTSTRAP = 1000  # resamples for the 95% CIs
 COPY_MAD = 0.5  # grey levels: a video closer than this to its reference (mean absolute difference) equals it
 COPY_SHARE = 0.9  # a submission whose videos equal their references this often is flagged as a probable copy

@@ -22,8 +22,8 @@ class LKTracker:
     name = "lk"
 
     def __init__(self):
-        self.version = (f"opencv {cv2.__version__} colour region (ΔE {tracking.COLOUR_DELTA_E:g}) + pyramidal LK "
-                        "with forward-backward check")
+        self.version = (f"opencv {cv2.__version__} colour region (ΔE {tracking.COLOUR_DELTA_E:g}, occlusion fit) "
+                        "+ pyramidal LK with forward-backward check")
 
     @staticmethod
     def prepare(frames: np.ndarray) -> tracking.ScoringVideo:
