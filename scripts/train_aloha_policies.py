@@ -31,12 +31,11 @@ sys.path.insert(0, str(ROOT))
 
 from wsp_data.platforms.aloha.experts import SCRIPTS, AlohaExpertSource, OutOfTime, Script  # noqa: E402
 from wsp_data.platforms.aloha.t3 import (  # noqa: E402
-    ARM_ACTION, CHECKPOINT_DIR, MAX_DELTA, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, AlohaPolicySource,
-    action_target, checkpoint_path, feature_names, features,
+    ARM_ACTION, CHECKPOINT_DIR, MAX_DELTA, T3_TASKS, AlohaPolicySource, action_target, checkpoint_path,
+    feature_names, features,
 )
-from wsp_data.platforms.maniskill.policies import (  # noqa: E402
-    fit, save_checkpoint, sha256, start_training, training_log,
-)
+from wsp_data.platforms.bc_model import fit, save_checkpoint, start_training  # noqa: E402
+from wsp_data.platforms.bc_policy import MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, sha256, training_log  # noqa: E402
 from wsp_data.schema import scene_seed  # noqa: E402
 
 EVAL_SEED_BASE = 910_000

@@ -30,10 +30,10 @@ sys.path.insert(0, str(ROOT))
 
 from wsp_data.platforms.libero.experts import LiberoExpertSource, PickPlaceScript  # noqa: E402
 from wsp_data.platforms.libero.t3 import (  # noqa: E402
-    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, LiberoPolicySource, checkpoint_path,
-    feature_names, features,
+    CHECKPOINT_DIR, T3_TASKS, LiberoPolicySource, checkpoint_path, feature_names, features,
 )
-from wsp_data.platforms.maniskill.policies import fit, save_checkpoint, sha256, start_training, training_log  # noqa: E402
+from wsp_data.platforms.bc_model import fit, save_checkpoint, start_training  # noqa: E402
+from wsp_data.platforms.bc_policy import MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, sha256, training_log  # noqa: E402
 
 EVAL_SEED_BASE = 910_000
 

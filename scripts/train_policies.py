@@ -32,10 +32,11 @@ sys.path.insert(0, str(ROOT))
 from wsp_data.platforms.maniskill.env import Observation  # noqa: E402  (sets the rendering env vars first)
 from wsp_data.platforms.maniskill.experts import ExpertSource  # noqa: E402
 from wsp_data.platforms.maniskill.policies import (  # noqa: E402
-    CHECKPOINT_DIR, MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, T3_TASKS, PolicySource, action_target, feature_names,
-    features, read_goal, save_checkpoint, sha256, start_training, training_log,
+    CHECKPOINT_DIR, T3_TASKS, PolicySource, action_target, feature_names, features, read_goal,
 )
-from wsp_data.platforms.maniskill.policies import fit as train  # noqa: E402
+from wsp_data.platforms.bc_model import fit as train  # noqa: E402
+from wsp_data.platforms.bc_model import save_checkpoint, start_training  # noqa: E402
+from wsp_data.platforms.bc_policy import MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, sha256, training_log  # noqa: E402
 
 # Held-out evaluation seeds: training range (< 1,000,000), disjoint from demonstration seeds and from the seeds
 # 900,000–900,009 on which the recipe (noise injection, step counts) was chosen.

@@ -307,7 +307,7 @@ def test_t3_group_shares_its_scene_and_keeps_every_source(aloha_release, qlimits
 
     from wsp_data.builders.t3 import SOURCE_GROUPS
     from wsp_data.platforms.aloha.t3 import OPERATORS, T3_TASKS, checkpoint_path
-    from wsp_data.platforms.maniskill.policies import sha256
+    from wsp_data.platforms.bc_policy import sha256
 
     ds = open_lerobot(aloha_release, "t3_aloha")
     rows = instance_rows(aloha_release, "t3_aloha")
@@ -389,7 +389,7 @@ def test_t3_policies_run_deterministically_and_replay(stage):
 
 def test_t3_missing_checkpoint_names_the_rebuild_command(tmp_path):
     from wsp_data.platforms.aloha.t3 import AlohaPolicySource
-    from wsp_data.platforms.maniskill.policies import PolicyCheckpointMissing
+    from wsp_data.platforms.bc_policy import PolicyCheckpointMissing
 
     with pytest.raises(PolicyCheckpointMissing, match="train_aloha_policies.py"):
         AlohaPolicySource("lift_cube", "late", checkpoint_dir=tmp_path)

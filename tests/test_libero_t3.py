@@ -6,11 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wsp_data.platforms.bc_policy import STAGES, PolicyCheckpointMissing
 from wsp_data.platforms.libero.experts import LiberoExpertSource
-from wsp_data.platforms.libero.t3 import (
-    OPERATORS, STAGES, T3_TASKS, LiberoOperatorSource, LiberoPolicySource, checkpoint_path,
-)
-from wsp_data.platforms.maniskill.policies import PolicyCheckpointMissing
+from wsp_data.platforms.libero.t3 import OPERATORS, T3_TASKS, LiberoOperatorSource, LiberoPolicySource, checkpoint_path
 
 TASK = T3_TASKS[0]
 SEED = 910_100  # a training-range seed outside the policies' demonstration and evaluation seeds

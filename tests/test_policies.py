@@ -8,10 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from wsp_data.platforms.maniskill.policies import (
-    CHECKPOINT_DIR, STAGES, T3_TASKS, TRAINING_CONFIG, PolicyCheckpointMissing, PolicySource, checkpoint_path,
-    feature_names,
-)
+from wsp_data.platforms.bc_policy import STAGES, TRAINING_CONFIG, PolicyCheckpointMissing
+from wsp_data.platforms.maniskill.policies import CHECKPOINT_DIR, T3_TASKS, PolicySource, checkpoint_path, feature_names
 
 
 @pytest.mark.parametrize("task", T3_TASKS)

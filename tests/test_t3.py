@@ -28,7 +28,7 @@ def ds(suites_release):
 
 def test_source_groups_match_the_sources():
     from wsp_data.platforms.maniskill.operators import OPERATORS
-    from wsp_data.platforms.maniskill.policies import STAGES
+    from wsp_data.platforms.bc_policy import STAGES
 
     assert OPERATOR_GROUPS == tuple(OPERATORS) and POLICY_GROUPS == tuple(f"policy_{s}" for s in STAGES)
     assert len(SOURCE_GROUPS) == 8

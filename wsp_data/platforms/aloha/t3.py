@@ -20,7 +20,7 @@ every parameter in the provenance, recorded as the same 14-D joint-target stream
 Their step budget is 2.5× the expert's (`experts.MAX_STEPS`); an attempt that runs out of it stops there. Joint
 targets are clipped to the joint limits. Failures are kept (the T3 builder records success).
 
-Policies (`AlohaPolicySource`): an MLP (`maniskill.policies.MLPPolicy`) from simulator state to the 14-D
+Policies (`AlohaPolicySource`): an MLP (`bc_model.MLPPolicy`) from simulator state to the 14-D
 joint-target action, trained by behaviour cloning on scripted-expert trajectories of training seeds plus
 noise-injected re-runs labelled with the script's clean action (`scripts/train_aloha_policies.py`); an early
 (200 of 20,000 steps: measured, the 10% checkpoint already solves 17–20 of 20 held-out scenes of every task) and a
@@ -43,14 +43,12 @@ import numpy as np
 from wsp_data.platforms.aloha import experts as ax
 from wsp_data.platforms.aloha.env import AlohaPlatform, aloha_task
 from wsp_data.platforms.aloha.experts import SCRIPTS, Hand, OutOfTime, Script
+from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
 
 T3_TASKS = ("transfer_cube", "lift_cube", "push_cube", "cube_in_bin", "stack_cubes")
-STAGES = ("early", "late")
 OPERATOR_STEP_BUDGET = 2.5  # × the expert's MAX_STEPS
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
 TRAIN_SCRIPT = "scripts/train_aloha_policies.py"
-SETTLE_STEPS = 5  # a policy rollout stops once success has held this many consecutive steps
-MAX_STEPS_FACTOR = 1.5  # a policy's step budget: this × the expert's mean length
 MAX_DELTA = 0.3  # rad: bound on a policy's arm target relative to the current joint positions
 ARM_ACTION = (0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12)  # native dims of the 12 arm joints (qpos columns 0–11)
 GRIP_ACTION = (6, 13)
@@ -186,8 +184,6 @@ def feature_names(task: str) -> list[str]:
 
 
 def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
-    from wsp_data.platforms.maniskill.policies import rot6d
-
     tcp = np.asarray(observation.tcp_pose, dtype=np.float64)
     parts = [np.asarray(observation.qpos, dtype=np.float64)]
     for k in (0, 1):
@@ -210,45 +206,30 @@ def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) 
     return Path(directory or CHECKPOINT_DIR) / f"{task}_{stage}.pt"
 
 
-class AlohaPolicySource:
-    """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only ALOHA platform."""
+class AlohaPolicySource(BCPolicySource):
+    """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only ALOHA platform; actions
+    are the 14-D joint targets: qpos + the network's deltas (each at most `MAX_DELTA`), clipped to the joint
+    limits, and both grippers snapped to open/closed."""
+
+    PLATFORM = "aloha"
+    TASKS = T3_TASKS
+    TRAIN_SCRIPT = TRAIN_SCRIPT
+    DOCS = "docs/aloha.md"
+    checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        from wsp_data.platforms.maniskill.policies import open_checkpoint
-
-        if task not in T3_TASKS:
-            raise KeyError(f"no policy for task {task!r}; T3 tasks: {', '.join(T3_TASKS)}")
-        if stage not in STAGES:
-            raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
-        self.task, self.stage = task, stage
-        self.path = checkpoint_path(task, stage, checkpoint_dir)
-        self.model, self.meta = open_checkpoint(self.path, f"{TRAIN_SCRIPT} --tasks {task}", "docs/aloha.md")
-        if self.meta["task"] != task or self.meta["stage"] != stage:
-            raise ValueError(f"{self.path} holds {self.meta['task']}/{self.meta['stage']}, not {task}/{stage}")
-        if self.meta["feature_names"] != feature_names(task):
-            raise ValueError(f"{self.path} was trained on other state features than this code computes")
+        super().__init__(task, stage, checkpoint_dir)
         self.spec = aloha_task(task)
-        self.ref_length = float(self.meta["expert_mean_length"])
-        self._platform: AlohaPlatform | None = None
 
-    @property
-    def platform(self) -> AlohaPlatform:
-        if self._platform is None:
-            self._platform = AlohaPlatform(self.task, render=False, objects=self.spec.objects)
-        return self._platform
+    def feature_names(self) -> list[str]:
+        return feature_names(self.task)
 
-    def close(self) -> None:
-        if self._platform is not None:
-            self._platform.close()
-            self._platform = None
+    def open_platform(self) -> AlohaPlatform:
+        return AlohaPlatform(self.task, render=False, objects=aloha_task(self.task).objects)
 
     def act(self, observation, step: int) -> np.ndarray:
         """The deterministic (14,) float32 joint-target action for an observation at `step` of an episode."""
-        import torch
-
-        x = torch.from_numpy(features(observation, len(self.spec.objects), step, self.ref_length))[None]
-        with torch.no_grad():
-            y = self.model(x)[0].double().numpy()
+        y = self.network(features(observation, len(self.spec.objects), step, self.ref_length))
         lim = self.platform.qlimits[:12]
         q = np.asarray(observation.qpos, dtype=np.float64)[:12]
         arm = np.clip(q + np.clip(y[:12], -MAX_DELTA, MAX_DELTA), lim[:, 0], lim[:, 1])
@@ -256,33 +237,3 @@ class AlohaPolicySource:
         a[list(ARM_ACTION)] = arm
         a[list(GRIP_ACTION)] = (y[12:14] >= 0.5).astype(np.float64)
         return a.astype(np.float32)
-
-    def default_max_steps(self) -> int:
-        return int(math.ceil(MAX_STEPS_FACTOR * self.ref_length))
-
-    def trajectory(self, seed: int, max_steps: int | None = None) -> tuple[np.ndarray, bool]:
-        """Closed-loop from scene `seed` until success has held SETTLE_STEPS steps or the budget (1.5 × the
-        expert's mean length) runs out: the executed (T, 14) float32 stream and whether it ends in success."""
-        max_steps = self.default_max_steps() if max_steps is None else int(max_steps)
-        ob = self.platform.reset(seed)
-        actions, held = [], 0
-        for t in range(max_steps):
-            a = self.act(ob, t)
-            actions.append(a)
-            ob = self.platform.step(a)
-            held = held + 1 if ob.success else 0
-            if held >= SETTLE_STEPS:
-                break
-        return np.stack(actions), bool(ob.success)
-
-    @property
-    def provenance(self) -> dict:
-        from wsp_data.platforms.maniskill.policies import sha256
-
-        m = self.meta
-        s = m.get("success", {})
-        return {"kind": "bc_policy", "platform": "aloha", "task": self.task, "stage": self.stage,
-                "checkpoint": self.path.name, "checkpoint_sha256": sha256(self.path),
-                "training_steps": m["training_steps"], "total_training_steps": m["total_training_steps"],
-                "success_rate": s.get("rate"), "success_seeds": s.get("seeds"), "success_successes": s.get("successes"),
-                "max_steps": self.default_max_steps(), "training_config": m["training_config"]}

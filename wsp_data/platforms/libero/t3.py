@@ -9,7 +9,7 @@ documented style, every parameter in the provenance:
 - H5 another approach path: cruises 10 cm higher and comes down onto the grasp from 6 cm beside it.
 Failures are kept (the T3 builder records success).
 
-Policies (`LiberoPolicySource`): an MLP (`policies.MLPPolicy`) from simulator state to the 7-D OSC action,
+Policies (`LiberoPolicySource`): an MLP (`bc_model.MLPPolicy`) from simulator state to the 7-D OSC action,
 trained by behaviour cloning on scripted-expert trajectories of training seeds
 (`scripts/train_libero_policies.py`); an early (10%) and a late (final) checkpoint per task in
 `wsp_data/platforms/libero/checkpoints/`. Features: qpos (9), grip-site position (3) and rotation 6-D (6), per task
@@ -19,12 +19,12 @@ mean length (1). Output: the 6 arm dimensions (bounded to ±0.9) and the gripper
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
 from wsp_data.platforms.libero.env import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
 from wsp_data.platforms.libero import experts as lx
 from wsp_data.platforms.libero.experts import PickPlaceScript, task_spec
@@ -36,12 +36,9 @@ T3_TASKS = (
     "libero_goal/put_the_bowl_on_the_stove",
     "libero_90/KITCHEN_SCENE1_put_the_black_bowl_on_the_plate",
 )
-STAGES = ("early", "late")
 OPERATOR_STEP_BUDGET = 2.5  # × the expert's step budget (H1 takes about twice the expert's time)
 OPERATOR_SUCCESS_WAIT = 20  # steps an operator waits for the goal after its place move; then it has failed
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
-SETTLE_STEPS = 5
-MAX_STEPS_FACTOR = 1.5
 
 OPERATORS: dict[str, dict] = {
     "H1": {"style": "slow", "gain": 0.35, "max_action": 0.35, "grip_steps": 1.5},
@@ -135,8 +132,6 @@ def feature_names(task: str) -> list[str]:
 
 
 def features(observation, n_objects: int, step: int, ref_length: float) -> np.ndarray:
-    from wsp_data.platforms.maniskill.policies import rot6d
-
     ee = np.asarray(observation.tcp_pose, dtype=np.float64)
     parts = [np.asarray(observation.qpos, dtype=np.float64), ee[:3], rot6d(ee[3:])]
     for k in range(n_objects):
@@ -150,70 +145,27 @@ def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) 
     return Path(directory or CHECKPOINT_DIR) / f"{task.replace('/', '__')}_{stage}.pt"
 
 
-class LiberoPolicySource:
-    """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only LIBERO env."""
+class LiberoPolicySource(BCPolicySource):
+    """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only LIBERO env; actions are
+    the 7-D OSC action: the 6 arm dimensions bounded to ±`MAX_ACTION`, the gripper snapped to open/closed."""
+
+    PLATFORM = "libero"
+    TASKS = T3_TASKS
+    TRAIN_SCRIPT = "scripts/train_libero_policies.py"
+    DOCS = "docs/libero.md"
+    checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        from wsp_data.platforms.maniskill.policies import open_checkpoint
-
-        if stage not in STAGES:
-            raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
-        self.task, self.stage = task, stage
-        self.path = checkpoint_path(task, stage, checkpoint_dir)
-        self.model, self.meta = open_checkpoint(self.path, f"scripts/train_libero_policies.py --tasks {task}",
-                                                "docs/libero.md")
-        if self.meta["feature_names"] != feature_names(task):
-            raise ValueError(f"{self.path} was trained on other state features than this code computes")
+        super().__init__(task, stage, checkpoint_dir)
         self.spec = task_spec(task)
-        self.ref_length = float(self.meta["expert_mean_length"])
-        self._platform: LiberoPlatform | None = None
 
-    @property
-    def platform(self) -> LiberoPlatform:
-        if self._platform is None:
-            self._platform = LiberoPlatform(self.task, render=False, objects=self.spec.objects)
-        return self._platform
+    def feature_names(self) -> list[str]:
+        return feature_names(self.task)
 
-    def close(self) -> None:
-        if self._platform is not None:
-            self._platform.close()
-            self._platform = None
+    def open_platform(self) -> LiberoPlatform:
+        return LiberoPlatform(self.task, render=False, objects=task_spec(self.task).objects)
 
     def act(self, observation, step: int) -> np.ndarray:
-        import torch
-
-        x = torch.from_numpy(features(observation, len(self.spec.objects), step, self.ref_length))[None]
-        with torch.no_grad():
-            y = self.model(x)[0].double().numpy()
+        y = self.network(features(observation, len(self.spec.objects), step, self.ref_length))
         arm = np.clip(y[:6], -lx.MAX_ACTION, lx.MAX_ACTION)
         return np.array([*arm, GRIPPER_CLOSED if y[6] >= 0 else GRIPPER_OPEN], dtype=np.float32)
-
-    def default_max_steps(self) -> int:
-        return int(math.ceil(MAX_STEPS_FACTOR * self.ref_length))
-
-    def trajectory(self, seed: int, max_steps: int | None = None) -> tuple[np.ndarray, bool]:
-        """Closed-loop from scene `seed` until success has held SETTLE_STEPS steps or the budget (1.5 × the
-        expert's mean length) runs out: the executed (T, 7) stream and whether it ends in success."""
-        max_steps = self.default_max_steps() if max_steps is None else int(max_steps)
-        ob = self.platform.reset(seed)
-        actions, held = [], 0
-        for t in range(max_steps):
-            a = self.act(ob, t)
-            actions.append(a)
-            ob = self.platform.step(a)
-            held = held + 1 if ob.success else 0
-            if held >= SETTLE_STEPS:
-                break
-        return np.stack(actions), bool(ob.success)
-
-    @property
-    def provenance(self) -> dict:
-        from wsp_data.platforms.maniskill.policies import sha256
-
-        m = self.meta
-        return {"kind": "bc_policy", "platform": "libero", "task": self.task, "stage": self.stage,
-                "checkpoint": self.path.name, "checkpoint_sha256": sha256(self.path),
-                "training_steps": m["training_steps"], "total_training_steps": m["total_training_steps"],
-                "success_rate": m.get("success", {}).get("rate"), "success_seeds": m.get("success", {}).get("seeds"),
-                "max_steps": self.default_max_steps(), "training_config": m["training_config"]}
-

@@ -19,32 +19,18 @@ arm part is added back to qpos and clipped to the joint limits, and the gripper 
 
 from __future__ import annotations
 
-import hashlib
-import json
-import math
-import sys
 from pathlib import Path
 
 import numpy as np
-import torch
-from torch import nn
 
-from wsp_data.schema import ACTION_DIM
+from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
 
 T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
-STAGES = ("early", "late")
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
-TRAINING_CONFIG = "training_config.json"
 TRAIN_SCRIPT = "scripts/train_policies.py"
-SETTLE_STEPS = 5  # a rollout stops once success has held this many consecutive steps
-MAX_STEPS_FACTOR = 1.5  # default step budget: this × the expert's mean trajectory length
 
 # The goal the observation does not carry: task → env attribute holding a (static) goal actor.
 GOAL_ATTR = {"PickCube": "goal_site", "PushCube": "goal_region", "PullCube": "goal_region"}
-
-
-class PolicyCheckpointMissing(FileNotFoundError):
-    """A policy checkpoint that is not on disk."""
 
 
 def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) -> Path:
@@ -52,17 +38,6 @@ def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) 
 
 
 # -- features ---------------------------------------------------------------------------------------
-def rot6d(q) -> np.ndarray:
-    """A unit quaternion (wxyz) as the first two columns of its rotation matrix (continuous, sign-free)."""
-    w, x, y, z = (float(v) for v in q)
-    n = math.sqrt(w * w + x * x + y * y + z * z) or 1.0
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([
-        1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),  # column 0
-        2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x),  # column 1
-    ], dtype=np.float64)
-
-
 def num_objects(task: str) -> int:
     from wsp_data.platforms.maniskill.experts import task_spec
 
@@ -112,149 +87,35 @@ def read_goal(platform, task: str) -> np.ndarray | None:
     return getattr(platform.u, attr).pose.p[0].detach().cpu().numpy().astype(np.float32)
 
 
-# -- model ------------------------------------------------------------------------------------------
-class MLPPolicy(nn.Module):
-    """Normalised state → normalised action target; normalisation statistics live in buffers."""
-
-    def __init__(self, in_dim: int, hidden: tuple[int, ...] = (256, 256), out_dim: int = ACTION_DIM):
-        super().__init__()
-        layers, d = [], in_dim
-        for h in hidden:
-            layers += [nn.Linear(d, h), nn.ReLU()]
-            d = h
-        layers.append(nn.Linear(d, out_dim))
-        self.net = nn.Sequential(*layers)
-        for name, dim in (("x_mean", in_dim), ("x_std", in_dim), ("y_mean", out_dim), ("y_std", out_dim)):
-            self.register_buffer(name, torch.zeros(dim) if "mean" in name else torch.ones(dim))
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        """Raw features → raw action target."""
-        return self.net((x - self.x_mean) / self.x_std) * self.y_std + self.y_mean
-
-
-def fit(X: np.ndarray, Y: np.ndarray, cfg: dict, log) -> tuple[MLPPolicy, MLPPolicy, list[float]]:
-    """Adam + cosine decay on MSE of normalised targets; returns (early, late) models and a loss log."""
-    torch.manual_seed(cfg["seed"])
-    gen = torch.Generator().manual_seed(cfg["seed"])
-    x, y = torch.from_numpy(X), torch.from_numpy(Y)
-    model = MLPPolicy(X.shape[1], tuple(cfg["hidden"]), Y.shape[1])
-    model.x_mean.copy_(x.mean(0))
-    model.x_std.copy_(x.std(0).clamp_min(cfg["std_floor"]))
-    model.y_mean.copy_(y.mean(0))
-    model.y_std.copy_(y.std(0).clamp_min(cfg["std_floor"]))
-    yn = (y - model.y_mean) / model.y_std
-    opt = torch.optim.AdamW(model.net.parameters(), lr=cfg["lr"], weight_decay=cfg["weight_decay"])
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt, lambda s: 0.5 * (1 + np.cos(np.pi * min(s, cfg["steps"]) / cfg["steps"])))
-    early, losses, running = None, [], 0.0
-    for step in range(1, cfg["steps"] + 1):
-        idx = torch.randint(len(x), (cfg["batch"],), generator=gen)
-        pred = model.net((x[idx] - model.x_mean) / model.x_std)
-        loss = torch.nn.functional.mse_loss(pred, yn[idx])
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        running += loss.item()
-        if step % 500 == 0:
-            losses.append(round(running / 500, 6))
-            running = 0.0
-            log(f"  step {step}: loss {losses[-1]:.4f}")
-        if step == cfg["early_steps"]:
-            early = MLPPolicy(X.shape[1], tuple(cfg["hidden"]), Y.shape[1])
-            early.load_state_dict(model.state_dict())
-    return early, model, losses
-
-
-def save_checkpoint(path: Path, model: MLPPolicy, meta: dict) -> None:
-    """A small checkpoint: float32 weights and buffers plus JSON-able metadata."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    state = {k: v.detach().clone().float().contiguous() for k, v in model.state_dict().items()}
-    torch.save({"format": "wsp-bc-mlp/1", "state_dict": state, "meta": json.dumps(meta, sort_keys=True)}, path)
-
-
-def load_checkpoint(path: Path) -> tuple[MLPPolicy, dict]:
-    blob = torch.load(path, map_location="cpu", weights_only=True)
-    meta = json.loads(blob["meta"])
-    model = MLPPolicy(meta["in_dim"], tuple(meta["hidden"]), meta.get("out_dim", ACTION_DIM))
-    model.load_state_dict(blob["state_dict"])
-    model.eval()
-    return model, meta
-
-
-def training_log(msg: str) -> None:
-    """The training scripts' progress line, on stderr."""
-    print(msg, file=sys.stderr, flush=True)
-
-
-def start_training(out: Path) -> tuple[dict, Path]:
-    """Set torch up for a reproducible CPU run (one thread, deterministic algorithms), create `out`, and return
-    its training record so far (`{"tasks": {…}}`) and the record's path."""
-    torch.set_num_threads(1)
-    torch.use_deterministic_algorithms(True)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / TRAINING_CONFIG
-    config = json.loads(path.read_text()) if path.is_file() else {}
-    config.setdefault("tasks", {})
-    return config, path
-
-
-def open_checkpoint(path: Path, rebuild: str, docs: str) -> tuple[MLPPolicy, dict]:
-    """Load a policy checkpoint, or raise PolicyCheckpointMissing naming the path and the rebuild command."""
-    if not Path(path).is_file():
-        raise PolicyCheckpointMissing(f"policy checkpoint {path} is missing; rebuild it with `.venv/bin/python "
-                                      f"{rebuild}` (see {docs})")
-    return load_checkpoint(Path(path))
-
-
-def sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
-
-
 # -- the source ------------------------------------------------------------------------------------
-class PolicySource:
-    """One checkpoint (task × stage) of a behaviour-cloned policy, run closed-loop in a state-only env."""
+class PolicySource(BCPolicySource):
+    """One checkpoint (task × stage) of a behaviour-cloned policy, run closed-loop in a state-only ManiSkill env;
+    actions are `pd_joint_pos` (8,): arm targets = qpos + the network's deltas, clipped to the joint limits,
+    and the gripper snapped to ±1."""
+
+    PLATFORM = "maniskill"
+    TASKS = T3_TASKS
+    TRAIN_SCRIPT = TRAIN_SCRIPT
+    DOCS = "docs/policies.md"
+    checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        if task not in T3_TASKS:
-            raise KeyError(f"no policy for task {task!r}; T3 tasks: {', '.join(T3_TASKS)}")
-        if stage not in STAGES:
-            raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
-        self.task, self.stage = task, stage
-        self.path = checkpoint_path(task, stage, checkpoint_dir)
-        self.model, self.meta = open_checkpoint(self.path, f"{TRAIN_SCRIPT} --tasks {task}", "docs/policies.md")
-        if self.meta["task"] != task or self.meta["stage"] != stage:
-            raise ValueError(f"{self.path} holds {self.meta['task']}/{self.meta['stage']}, not {task}/{stage}")
-        if self.meta["feature_names"] != feature_names(task):
-            raise ValueError(f"{self.path} was trained on other state features than this code computes")
-        self.ref_length = float(self.meta["expert_mean_length"])
-        self._platform = None
+        super().__init__(task, stage, checkpoint_dir)
         self._limits = np.asarray(self.meta["arm_limits"], dtype=np.float64)  # (7, 2) rad
         self.goal: np.ndarray | None = None  # the goal of the current episode of the own platform
-        self.observations: list = []  # the T+1 observations of the last trajectory() (frame 0 = after reset)
 
-    # -- lifecycle ---------------------------------------------------------------------------------
-    @property
-    def platform(self):
-        if self._platform is None:
-            from wsp_data.platforms.maniskill.env import ManiSkillPlatform
-            from wsp_data.platforms.maniskill.experts import task_spec
+    def feature_names(self) -> list[str]:
+        return feature_names(self.task)
 
-            self._platform = ManiSkillPlatform(self.task, render=False, objects=task_spec(self.task).objects)
-        return self._platform
+    def open_platform(self):
+        from wsp_data.platforms.maniskill.env import ManiSkillPlatform
+        from wsp_data.platforms.maniskill.experts import task_spec
 
-    def close(self) -> None:
-        if self._platform is not None:
-            self._platform.close()
-            self._platform = None
+        return ManiSkillPlatform(self.task, render=False, objects=task_spec(self.task).objects)
 
-    def __enter__(self) -> PolicySource:
-        return self
+    def on_reset(self, observation) -> None:
+        self.goal = read_goal(self.platform, self.task)
 
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    # -- acting ------------------------------------------------------------------------------------
     def act(self, observation, step: int = 0, goal: np.ndarray | None = None) -> np.ndarray:
         """The deterministic (8,) float32 `pd_joint_pos` action for an observation at `step` of an episode.
         `goal` (PickCube, PushCube, PullCube) defaults to the goal of the own platform's current episode."""
@@ -262,50 +123,8 @@ class PolicySource:
             if self.goal is None:
                 raise ValueError(f"{self.task} needs a goal: pass goal= or run trajectory() first")
             goal = self.goal
-        x = torch.from_numpy(features(self.task, observation, step, goal, self.ref_length))[None]
-        with torch.no_grad():
-            y = self.model(x)[0].double().numpy()
+        y = self.network(features(self.task, observation, step, goal, self.ref_length))
         arm = np.asarray(observation.qpos, dtype=np.float64)[:7] + y[:7]
         arm = np.clip(arm, self._limits[:, 0], self._limits[:, 1])
         grip = 1.0 if y[7] >= 0 else -1.0
         return np.array([*arm, grip], dtype=np.float32)
-
-    def default_max_steps(self) -> int:
-        return int(math.ceil(MAX_STEPS_FACTOR * self.ref_length))
-
-    def trajectory(self, seed: int, max_steps: int | None = None, settle: int = SETTLE_STEPS
-                   ) -> tuple[np.ndarray, bool]:
-        """Run the policy closed-loop from `reset(seed)` until success has held `settle` consecutive steps or
-        `max_steps` (default 1.5 × the expert's mean length) ran out. Returns the executed (T, 8) float32
-        stream and whether the last step ends in success; `observations` keeps the T+1 states it went through."""
-        max_steps = self.default_max_steps() if max_steps is None else int(max_steps)
-        p = self.platform
-        ob = p.reset(seed)
-        self.goal = read_goal(p, self.task)
-        self.observations = [ob]
-        actions, held = [], 0
-        for t in range(max_steps):
-            a = self.act(ob, t)
-            actions.append(a)
-            ob = p.step(a)
-            self.observations.append(ob)
-            held = held + 1 if ob.success else 0
-            if held >= settle:
-                break
-        return np.stack(actions).astype(np.float32), bool(ob.success)
-
-    # -- provenance --------------------------------------------------------------------------------
-    @property
-    def provenance(self) -> dict:
-        m = self.meta
-        return {
-            "kind": "bc_policy",  # behaviour-cloned policy
-            "task": self.task, "stage": self.stage,
-            "checkpoint": self.path.name, "checkpoint_sha256": sha256(self.path),
-            "training_steps": m["training_steps"], "total_training_steps": m["total_training_steps"],
-            "success_rate": m.get("success", {}).get("rate"),
-            "success_seeds": m.get("success", {}).get("seeds"),
-            "success_successes": m.get("success", {}).get("successes"),
-            "max_steps": self.default_max_steps(),
-            "training_config": m["training_config"],
-        }
