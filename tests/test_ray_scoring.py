@@ -1,5 +1,6 @@
 """`wsp score --executor ray`: instances scored as Ray tasks (a local two-CPU Ray instance) give exactly the
-local run's per-instance scores, and the report says which executor ran."""
+local run's per-instance scores, and the report says which executor ran; without an address the runner starts its
+own Ray instance even where another one runs on the machine."""
 
 from __future__ import annotations
 
@@ -27,3 +28,24 @@ def test_ray_scores_equal_local_scores(suites_release, tmp_path):
     per = lambda r: {(i["config"], i["instance_id"]): i["seeds"] for i in r["instances"]}  # noqa: E731
     assert per(reports["ray"]) == per(reports["local"]) and len(per(reports["local"])) == 9
     assert reports["ray"]["timing"]["executor"] == "ray"
+
+
+def test_no_address_starts_a_new_instance_beside_a_running_cluster(monkeypatch):
+    """A cluster already running on the machine (named by RAY_ADDRESS, or the last `ray start`/test cluster in
+    /tmp/ray) is what Ray's default `ray.init()` joins, and then refuses a CPU count: CI once failed this way while
+    the multi-node build test's cluster ran beside this file. Without `--address` the runner starts its own."""
+    from ray.cluster_utils import Cluster
+
+    from wsp_eval.ray_tasks import ray_imap
+    from wsp_eval.release_format import split_config
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        monkeypatch.setenv("RAY_ADDRESS", cluster.address)
+        out = sorted(ray_imap(split_config, ["t1_maniskill", "t5_aloha"], workers=1, address=None))
+        assert out == [("t1", "maniskill"), ("t5", "aloha")]
+        import ray
+
+        assert not ray.is_initialized()  # the runner's own instance is stopped; the other cluster is untouched
+    finally:
+        cluster.shutdown()

@@ -2,8 +2,9 @@
 
 `ray_imap(fn, items)` runs `fn(item)` for every item as a Ray task of one CPU and yields the results as they
 complete (completion order), keeping a bounded number of tasks in flight. A task whose worker or node dies is
-retried (`MAX_RETRIES`), so a lost node costs only the tasks it was running. Without an address a local Ray
-instance with `workers` CPUs is started (and stopped at the end); with one (`auto`, or `host:port`), the
+retried (`MAX_RETRIES`), so a lost node costs only the tasks it was running. Without an address a new local Ray
+instance with `workers` CPUs is started (and stopped at the end) — never one already running on the machine, which
+Ray's default would join (and then refuse the CPU count); with one (`auto`, or `host:port`), the
 cluster's CPUs decide how many tasks run at once. Every node needs this project installed (the same version).
 Ray's own output goes to its session log folder (`/tmp/ray/session_latest/logs`), never to the terminal. Ray
 comes with the `cluster` extra; the scoring-only install has none.
@@ -28,7 +29,7 @@ def ray_imap(fn: Callable[[Any], Any], items: Iterable, workers: int, address: s
         if address:
             ray.init(address=address, **common)
         else:
-            ray.init(num_cpus=workers, **common)
+            ray.init(address="local", num_cpus=workers, **common)
     try:
         remote = ray.remote(num_cpus=1, max_retries=MAX_RETRIES)(fn)
         limit = max(1, int(ray.cluster_resources().get("CPU", workers))) * IN_FLIGHT_PER_CPU
