@@ -250,6 +250,21 @@ def test_a_cube_lifted_under_fingers_moves_by_its_true_lift():
     assert m.displacement == pytest.approx(12, abs=0.1) and m.visible_fraction == 1.0
 
 
+def test_no_occlusion_fit_for_a_cube_the_hand_touches_in_frame_0():
+    """Frame 0 already shows the fingers over the cube's top: its frame-0 region is only part of the cube, no model
+    of its shape, so the object gets no occlusion fit (`shape` None) and is followed by its visible centroid; with
+    the hand away in frame 0 the shape is kept."""
+    hand = (CUBE_AT[0], CUBE_AT[1] - 7)
+    frames = colour_scene(2, lambda t: CUBE_AT, hand_at_=lambda t: hand, hand_size=16)
+    mask = np.zeros((S, S), np.uint8)
+    mask[hand[1] - 8:hand[1] + 8, hand[0] - 8:hand[0] + 8] = 2
+    visible_part = np.array([CUBE_AT[0], CUBE_AT[1] + 2], float)
+    touched = tr.colour_model(tr.scoring_video(frames).rgb[0], visible_part, mask)
+    assert touched is not None and touched.shape is None
+    free = tr.colour_model(tr.scoring_video(colour_scene(1, lambda t: CUBE_AT)).rgb[0], visible_part, far_hand_mask())
+    assert free is not None and free.shape.shape == (7, 7)
+
+
 def test_a_hidden_cube_is_invisible_and_keeps_its_place():
     """A still cube covered entirely by a passing hand in frames 4–8: invisible there (the occlusion rule),
     its last position kept, so d ≈ 0 and the visible fraction is 9/14."""

@@ -34,7 +34,8 @@ object coloured like the robot) the points are tracked by LK as above. The occlu
 (by the hand, or carried out of sight) is invisible, keeps its last position, and counts against the
 tracking-failure rule of `t4_score`. An object *partly* hidden (its visible region smaller than
 `FIT_PART_MAX` of its frame-0 area: fingers over a cube's top) is placed by an occlusion-aware fit of its
-frame-0 shape (`occlusion_fit`): the shape's translation that covers the most visible object pixels while
+frame-0 shape (`occlusion_fit`; only where frame 0 shows the object whole: no robot pixel within
+`HIDDEN_AT_START` of it): the shape's translation that covers the most visible object pixels while
 lying on the fewest background pixels, where background is what still looks as it did in frame 0 or like the
 object's frame-0 surroundings, and anything else (a finger, its shadow) may be hiding the object. Why: the
 visible part's centroid slides away from the occluder — measured on ALOHA, a cube under closing fingers read
@@ -93,6 +94,8 @@ BACKGROUND_DELTA_E = 6.0  # CIE76 ΔE within which a pixel still looks like fram
 #   object's frame-0 surroundings: background, which the object's shape may not cover (codec noise on a
 #   lossless-contract submission is ≤ 1; a finger or its shadow is ≥ 10 away)
 SURROUND_RING = (2.0, 6.0)  # px: the object's frame-0 surroundings: pixels this far from its region
+HIDDEN_AT_START = 2.0  # px: a robot pixel this close to the frame-0 region may hide part of the object, whose
+#   frame-0 shape is then no model of it: no occlusion fit for that object (its centroid, as before the fit)
 
 _LK = dict(winSize=(LK_WINDOW, LK_WINDOW), criteria=LK_CRITERIA)
 
@@ -261,13 +264,14 @@ TrackFn = Callable[..., "Tracks"]  # (video, points, *, anchored) -> Tracks: `tr
 @dataclass
 class ColourModel:
     """The evaluated object's colour (Lab, float) and its frame-0 region: area (px²), centroid (x, y), shape
-    (a binary crop of the region, uint8) and the centroid's offset in that crop (x, y); plus what is background
+    (a binary crop of the region, uint8; None when the robot touches the region in frame 0, which may then
+    show only part of the object) and the centroid's offset in that crop (x, y); plus what is background
     for `occlusion_fit`: the whole frame 0 in Lab (256, 256, 3) and the colours around the region (K, 3)."""
 
     lab: np.ndarray
     area: int
     centre: np.ndarray
-    shape: np.ndarray
+    shape: np.ndarray | None
     shape_centre: np.ndarray
     lab0: np.ndarray
     surround: np.ndarray
@@ -307,8 +311,9 @@ def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarra
     ring = (away > SURROUND_RING[0]) & (away <= SURROUND_RING[1])
     surround = np.unique(np.round(lab0[ring] / 2.0), axis=0) * 2.0  # distinct colours, to 2 ΔE
     centre = np.array([xs.mean(), ys.mean()])
-    return ColourModel(lab, len(xs), centre, region[ys.min():ys.max() + 1, xs.min():xs.max() + 1].astype(np.uint8),
-                       centre - (xs.min(), ys.min()), lab0, surround.astype(np.float32))
+    hidden0 = bool((robot & (away <= HIDDEN_AT_START)).any())  # the robot touches it in frame 0
+    shape = None if hidden0 else region[ys.min():ys.max() + 1, xs.min():xs.max() + 1].astype(np.uint8)
+    return ColourModel(lab, len(xs), centre, shape, centre - (xs.min(), ys.min()), lab0, surround.astype(np.float32))
 
 
 def occlusion_fit(rgb: np.ndarray, visible: np.ndarray, model: ColourModel, estimate: np.ndarray) -> np.ndarray:
@@ -344,7 +349,8 @@ def region_tracks(rgb: np.ndarray, points: np.ndarray, model: ColourModel) -> Tr
     """The query points moved rigidly with the object's colour region through an RGB scoring-frame video: in
     each frame the region of the object's colour nearest its last position (within `REGION_JUMP_MAX`, at least
     `REGION_PART_MIN` of its frame-0 area), placed by its centroid, or by `occlusion_fit` when smaller than
-    `FIT_PART_MAX` of its frame-0 area; none: invisible, last position kept."""
+    `FIT_PART_MAX` of its frame-0 area and the frame-0 shape is whole (`model.shape`); none: invisible, last
+    position kept."""
     points = np.asarray(points, np.float32).reshape(-1, 2)
     T = len(rgb)
     pos = np.repeat(points[None], T, axis=0)
@@ -365,7 +371,7 @@ def region_tracks(rgb: np.ndarray, points: np.ndarray, model: ColourModel) -> Tr
         k = found[int(np.argmin(dist))]
         last = centres[k] + (x0, y0)  # the search follows the visible part
         at = last
-        if stats[k, cv2.CC_STAT_AREA] < FIT_PART_MAX * model.area:
+        if model.shape is not None and stats[k, cv2.CC_STAT_AREA] < FIT_PART_MAX * model.area:
             visible = np.zeros((SCORING_SIZE, SCORING_SIZE), bool)
             visible[y0:y1, x0:x1] = labels == k
             at = occlusion_fit(rgb[t], visible, model, last)
