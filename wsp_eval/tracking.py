@@ -281,8 +281,13 @@ def _lab(rgb: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
 
 
+def _near(lab: np.ndarray, colour: np.ndarray, delta_e: float) -> np.ndarray:
+    """Which pixels of a Lab image lie within CIE76 `delta_e` of `colour` (one Lab colour, or an image of them)."""
+    return np.linalg.norm(lab - colour, axis=-1) < delta_e
+
+
 def _colour_mask(rgb: np.ndarray, lab: np.ndarray) -> np.ndarray:
-    return (np.linalg.norm(_lab(rgb) - lab, axis=-1) < COLOUR_DELTA_E).astype(np.uint8)
+    return _near(_lab(rgb), lab, COLOUR_DELTA_E).astype(np.uint8)
 
 
 def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray) -> ColourModel | None:
@@ -293,8 +298,9 @@ def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarra
     k = COLOUR_PATCH
     if not (k <= x < SCORING_SIZE - k and k <= y < SCORING_SIZE - k):
         return None
-    lab = np.median(_lab(rgb0[y - k:y + k + 1, x - k:x + k + 1]).reshape(-1, 3), axis=0)
-    match = _colour_mask(rgb0, lab)
+    lab0 = _lab(rgb0)
+    lab = np.median(lab0[y - k:y + k + 1, x - k:x + k + 1].reshape(-1, 3), axis=0)
+    match = _near(lab0, lab, COLOUR_DELTA_E).astype(np.uint8)
     _, labels = cv2.connectedComponents(match, connectivity=8)
     ids = labels[y - k:y + k + 1, x - k:x + k + 1].ravel()
     if not (ids > 0).any():
@@ -306,7 +312,6 @@ def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarra
     robot = scoring_mask(robot_mask0) > 0
     if robot.any() and match[robot].mean() > ROBOT_COLOUR_MAX:
         return None
-    lab0 = _lab(rgb0)
     away = cv2.distanceTransform((~region).astype(np.uint8), cv2.DIST_L2, 3)
     ring = (away > SURROUND_RING[0]) & (away <= SURROUND_RING[1])
     surround = np.unique(np.round(lab0[ring] / 2.0), axis=0) * 2.0  # distinct colours, to 2 ΔE
@@ -331,11 +336,11 @@ def occlusion_fit(rgb: np.ndarray, visible: np.ndarray, model: ColourModel, esti
     if x1 - x0 < w or y1 - y0 < h:
         return np.asarray(estimate, np.float64)
     lab = _lab(rgb[y0:y1, x0:x1])
-    coloured = np.linalg.norm(lab - model.lab, axis=-1) < COLOUR_DELTA_E
-    unchanged = np.linalg.norm(lab - model.lab0[y0:y1, x0:x1], axis=-1) < BACKGROUND_DELTA_E
+    coloured = _near(lab, model.lab, COLOUR_DELTA_E)
+    unchanged = _near(lab, model.lab0[y0:y1, x0:x1], BACKGROUND_DELTA_E)
     like_surround = np.zeros_like(unchanged)
     for colour in model.surround:
-        like_surround |= np.linalg.norm(lab - colour, axis=-1) < BACKGROUND_DELTA_E
+        like_surround |= _near(lab, colour, BACKGROUND_DELTA_E)
     background = (~coloured & (unchanged | like_surround)).astype(np.float32)
     shape = model.shape.astype(np.float32)
     score = (2 * cv2.matchTemplate(visible[y0:y1, x0:x1].astype(np.float32), shape, cv2.TM_CCORR)

@@ -225,7 +225,7 @@ class AlohaPolicySource(BCPolicySource):
         return feature_names(self.task)
 
     def open_platform(self) -> AlohaPlatform:
-        return AlohaPlatform(self.task, render=False, objects=aloha_task(self.task).objects)
+        return AlohaPlatform(self.task, render=False, objects=self.spec.objects)
 
     def act(self, observation, step: int) -> np.ndarray:
         """The deterministic (14,) float32 joint-target action for an observation at `step` of an episode."""

@@ -163,7 +163,7 @@ class LiberoPolicySource(BCPolicySource):
         return feature_names(self.task)
 
     def open_platform(self) -> LiberoPlatform:
-        return LiberoPlatform(self.task, render=False, objects=task_spec(self.task).objects)
+        return LiberoPlatform(self.task, render=False, objects=self.spec.objects)
 
     def act(self, observation, step: int) -> np.ndarray:
         y = self.network(features(observation, len(self.spec.objects), step, self.ref_length))
