@@ -19,7 +19,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
-from wsp_data.build import _open_staging, _run_slots, assemble, prepare_output
+from wsp_data.build import assemble, decide_slots, open_staging, prepare_output
 from wsp_data.builders import BuildConfig
 from wsp_data.platforms import kit
 from wsp_data.schema import STAGING_DIR
@@ -30,8 +30,8 @@ from wsp_eval.console import library_output_to
 def stage(out: Path, platform: str, suite: str, count: int) -> Path:
     """Decide `count` slots of the config into `out`'s staging with one worker, without assembling."""
     config = BuildConfig(suite, platform, count, tuple(kit(platform).tasks()))
-    staging = _open_staging(prepare_output(out), config, restart=False)
-    for _ in _run_slots(config, staging, [k for k in range(count) if not staging.is_decided(k)], workers=1):
+    staging = open_staging(prepare_output(out), config, restart=False)
+    for _ in decide_slots(config, staging, [k for k in range(count) if not staging.is_decided(k)], workers=1):
         pass
     return staging.root
 

@@ -75,7 +75,9 @@ def prepare_output(out: Path) -> Path:
     return out
 
 
-def _open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
+def open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
+    """The staging folder of `config` under `out`, created, or resumed when the same configuration is staged
+    (`restart`: discarded first); a different staged configuration is refused."""
     staging = Staging(out / STAGING_DIR / config.name)
     cfg_path = staging.root / CONFIG_JSON
     if restart:
@@ -148,8 +150,9 @@ def _worker_decide(slot: int) -> SlotRecord:
 EXECUTORS = ("local", "ray")  # local: this process, or a process pool with --workers > 1; ray: see ray_executor
 
 
-def _run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, executor: str = "local",
-               address: str | None = None) -> Iterator[SlotRecord]:
+def decide_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, executor: str = "local",
+                 address: str | None = None) -> Iterator[SlotRecord]:
+    """Decide `slots` on `workers` processes (or Ray tasks), staging each kept instance; records as they end."""
     if executor == "ray":
         from wsp_data.ray_executor import run_slots
 
@@ -274,12 +277,12 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
     shard_tag = "" if total == 1 else f"_shard{index}of{total}"  # concurrent shards: one log each
     log = out / LOG_DIR / f"build_{config.name}{shard_tag}.log"
     with library_output_to(log):
-        staging = _open_staging(out, config, restart)
+        staging = open_staging(out, config, restart)
         t0 = time.perf_counter()
         todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
         decided = kept = steps = proposed = 0
         bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="slot", disable=not progress, file=terminal())
-        for record in _run_slots(config, staging, todo, workers, executor, address):
+        for record in decide_slots(config, staging, todo, workers, executor, address):
             decided += 1
             kept += record.kept
             proposed += len(record.attempts)
