@@ -33,7 +33,8 @@ from wsp_data.platforms.libero.t3 import (  # noqa: E402
     CHECKPOINT_DIR, T3_TASKS, LiberoPolicySource, checkpoint_path, feature_names, features,
 )
 from wsp_data.platforms.bc_model import fit, save_checkpoint, start_training  # noqa: E402
-from wsp_data.platforms.bc_policy import MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, sha256, training_log  # noqa: E402
+from wsp_data.platforms.bc_policy import (  # noqa: E402
+    MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, closed_loop_success, sha256, training_log)
 
 EVAL_SEED_BASE = 910_000
 
@@ -90,18 +91,7 @@ def collect(task: str, demos: int, noisy: int, std: float, log) -> tuple[np.ndar
 
 
 def evaluate(task: str, stage: str, out: Path, seeds: list[int]) -> dict:
-    src = LiberoPolicySource(task, stage, checkpoint_dir=out)
-    ok, lengths = [], []
-    try:
-        for s in seeds:
-            actions, success = src.trajectory(s)
-            ok.append(success)
-            lengths.append(len(actions))
-    finally:
-        src.close()
-    return {"rate": round(float(np.mean(ok)), 4), "successes": int(np.sum(ok)), "seeds": len(seeds),
-            "seed_range": [seeds[0], seeds[-1]], "mean_steps": round(float(np.mean(lengths)), 1),
-            "max_steps": src.default_max_steps()}
+    return closed_loop_success(LiberoPolicySource(task, stage, checkpoint_dir=out), seeds)[0]
 
 
 def main(argv=None) -> int:

@@ -36,7 +36,8 @@ from wsp_data.platforms.maniskill.policies import (  # noqa: E402
 )
 from wsp_data.platforms.bc_model import fit as train  # noqa: E402
 from wsp_data.platforms.bc_model import save_checkpoint, start_training  # noqa: E402
-from wsp_data.platforms.bc_policy import MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, sha256, training_log  # noqa: E402
+from wsp_data.platforms.bc_policy import (  # noqa: E402
+    MAX_STEPS_FACTOR, SETTLE_STEPS, STAGES, closed_loop_success, sha256, training_log)
 
 # Held-out evaluation seeds: training range (< 1,000,000), disjoint from demonstration seeds and from the seeds
 # 900,000–900,009 on which the recipe (noise injection, step counts) was chosen.
@@ -152,21 +153,10 @@ def expert_jerk(d: dict) -> float:
 
 
 def evaluate(task: str, stage: str, out: Path, seeds: list[int]) -> dict:
-    """Closed-loop success of one checkpoint on `seeds` (each from its own reset(seed))."""
+    """Closed-loop success of one checkpoint on `seeds` (each from its own reset(seed)), with the streams' jerk."""
     t0 = time.perf_counter()
-    src = PolicySource(task, stage, checkpoint_dir=out)
-    ok, lengths, jerks = [], [], []
-    try:
-        for s in seeds:
-            actions, success = src.trajectory(s)
-            ok.append(bool(success))
-            lengths.append(len(actions))
-            jerks.append(jerk(actions))
-    finally:
-        src.close()
-    return {"rate": round(float(np.mean(ok)), 4), "successes": int(np.sum(ok)), "seeds": len(seeds),
-            "seed_range": [seeds[0], seeds[-1]], "mean_steps": round(float(np.mean(lengths)), 1),
-            "max_steps": src.default_max_steps(), "mean_jerk": round(float(np.mean(jerks)), 6),
+    summary, streams = closed_loop_success(PolicySource(task, stage, checkpoint_dir=out), seeds)
+    return {**summary, "mean_jerk": round(float(np.mean([jerk(a) for a in streams])), 6),
             "seconds": round(time.perf_counter() - t0, 1)}
 
 

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from wsp_data.platforms.bc_policy import STAGES, TRAINING_CONFIG, PolicyCheckpointMissing
+from wsp_data.platforms.bc_policy import STAGES, TRAINING_CONFIG, PolicyCheckpointMissing, closed_loop_success
 from wsp_data.platforms.maniskill.policies import CHECKPOINT_DIR, T3_TASKS, PolicySource, checkpoint_path, feature_names
 
 
@@ -80,3 +80,17 @@ def test_policy_stream_is_deterministic_and_replays_to_its_states():
     finally:
         late.close()
         early.close()
+
+
+def test_closed_loop_success_summarises_each_rollout():
+    """What the training scripts record as a checkpoint's success (`closed_loop_success`) is the rollouts'
+    own: per seed, the stream and success `trajectory` gives, and the source is closed after."""
+    task, seeds = "PushCube", [950_001]  # a training-range seed no checkpoint was evaluated on
+    summary, streams = closed_loop_success(PolicySource(task, "late"), seeds)
+    with PolicySource(task, "late") as src:
+        runs = [src.trajectory(s) for s in seeds]
+        budget = src.default_max_steps()
+    assert all(np.array_equal(a, b) for a, (b, _) in zip(streams, runs))
+    (stream, ok), = runs
+    assert summary == {"rate": float(ok), "successes": int(ok), "seeds": 1, "seed_range": seeds * 2,
+                       "mean_steps": float(len(stream)), "max_steps": budget}

@@ -164,3 +164,19 @@ class BCPolicySource(ABC):
                 "success_rate": success.get("rate"), "success_seeds": success.get("seeds"),
                 "success_successes": success.get("successes"), "max_steps": self.default_max_steps(),
                 "training_config": m["training_config"]}
+
+
+def closed_loop_success(source: BCPolicySource, seeds: list[int]) -> tuple[dict, list[np.ndarray]]:
+    """A policy source's closed-loop success over `seeds` (each rollout from its own `reset(seed)`; the source
+    is closed after): the summary the training scripts record, and every rollout's action stream."""
+    ok, streams = [], []
+    try:
+        for s in seeds:
+            actions, success = source.trajectory(s)
+            ok.append(success)
+            streams.append(actions)
+    finally:
+        source.close()
+    return {"rate": round(float(np.mean(ok)), 4), "successes": int(np.sum(ok)), "seeds": len(seeds),
+            "seed_range": [seeds[0], seeds[-1]], "mean_steps": round(float(np.mean([len(a) for a in streams])), 1),
+            "max_steps": source.default_max_steps()}, streams
