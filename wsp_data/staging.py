@@ -8,6 +8,7 @@ flight and never leaves a half-written slot behind. Assembly into LeRobot reads 
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
@@ -56,9 +57,13 @@ class RolloutArrays:
     def num_frames(self) -> int:
         return len(self.rgb)
 
-    def save(self, path: Path) -> None:
+    def encode(self) -> bytes:
+        """The rollout as the compressed npz file it is staged as (compressing is most of staging's cost: a
+        worker encodes, so a driver that only writes the bytes does not serialise the build)."""
         arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray)}
-        np.savez_compressed(path, role=np.array(self.role), seed=np.array(self.seed), **arrays)
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, role=np.array(self.role), seed=np.array(self.seed), **arrays)
+        return buffer.getvalue()
 
     @classmethod
     def load(cls, path: Path) -> RolloutArrays:
@@ -94,12 +99,16 @@ class Staging:
         return (self.slot_dir(slot) / SLOT_JSON).exists()
 
     def write_slot(self, record: SlotRecord, rollouts: list[RolloutArrays]) -> None:
+        self.write_encoded(record, {r.role: r.encode() for r in rollouts})
+
+    def write_encoded(self, record: SlotRecord, rollouts: dict[str, bytes]) -> None:
+        """Stage a decided slot whose rollouts are already encoded (`RolloutArrays.encode`, by role)."""
         final = self.slot_dir(record.slot)
         tmp = final.with_name(final.name + f".tmp{os.getpid()}")
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir(parents=True)
-        for r in rollouts:
-            r.save(tmp / f"{r.role}.npz")
+        for role, npz in rollouts.items():
+            (tmp / f"{role}.npz").write_bytes(npz)
         (tmp / SLOT_JSON).write_text(json.dumps(vars(record), indent=1, sort_keys=True, default=_jsonable))
         shutil.rmtree(final, ignore_errors=True)
         os.replace(tmp, final)
