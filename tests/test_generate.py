@@ -81,6 +81,8 @@ def test_killed_run_resumes(t1_release, tmp_path):
     (lambda f, a, fps, s: shift_model(f, a, fps, s)[:-1], r"frames; the reference horizon is"),
     (lambda f, a, fps, s: np.full((len(a), *f.shape), np.nan), r"NaN"),
     (lambda f, a, fps, s: f, r"frames of shape \(128, 128, 3\); expected \(N, H, W, 3\)"),
+    (lambda f, a, fps, s: np.zeros((len(a), 256, 256, 3), np.uint8),
+     r"frames of 256×256 pixels; the reference frame is 128×128: return frames at its resolution"),
 ])
 def test_bad_output_names_the_episode(t1_release, tmp_path, bad, message):
     with pytest.raises(GenerateError, match=rf"^t1_maniskill/episode_000000/seed0: .*{message}"):

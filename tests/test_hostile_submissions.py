@@ -250,16 +250,26 @@ def test_wrong_frame_rates(sub, t1_release):
     assert read_video(sub / rel(6))[1] == 10.0
 
 
-def test_mixed_resolutions_in_one_instance(sub, t1_release, oracle_report, tmp_path):
-    """T1 compares an instance's videos pixel by pixel: one at another (allowed) size is named, and scoring
-    scores that seed 0 instead of failing."""
+def test_another_resolution_than_the_reference_is_refused(sub, t1_release, oracle_report, tmp_path):
+    """A video resampled from the reference's 128×128 (here 2× up, losslessly) is refused by validate and score
+    (resampling alone costs the oracle up to 5 points, docs/validity.md §5); with --accept-lossy it is scored,
+    and T1, which compares an instance's videos pixel by pixel, then names the one unlike the others and scores
+    that seed 0 instead of failing."""
     frames, _ = read_video(sub / rel(1))
     encode(sub / rel(1), np.repeat(np.repeat(frames, 2, axis=1), 2, axis=2))
-    message = "256×256 pixels, unlike the 128×128 of the other videos of its instance; export every video of an " \
-              "instance at one resolution"
-    assert by_file(sub, t1_release) == {rel(1): [message]}
-    report = score_submission(sub, t1_release, tmp_path / "report", progress=False, allow_missing=True)
-    assert report["problems"] == [f"{rel(1)}: {message}"]
+    refused = "256×256 pixels; the references of t1_maniskill are 128×128: export at the reference's resolution " \
+              "(a resampled oracle loses up to 5 points of T1-T3, docs/validity.md §5), or score it anyway with " \
+              "`wsp score --accept-lossy`"
+    assert by_file(sub, t1_release) == {rel(1): [refused]}
+    report = score_submission(sub, t1_release, tmp_path / "refused", progress=False, allow_missing=True)
+    assert report["problems"] == [f"{rel(1)}: {refused}"]
+    assert report["encoding_check"] == "lossless at the reference resolution only"
+    unlike = "256×256 pixels, unlike the 128×128 of the other videos of its instance; export every video of an " \
+             "instance at one resolution"
+    report = score_submission(sub, t1_release, tmp_path / "accepted", progress=False, allow_missing=True,
+                              accept_lossy=True)
+    assert report["problems"] == [f"{rel(1)}: {unlike}"]
+    assert report["encoding_check"] == "off (lossy or resampled videos scored)"
     assert [r["score"] for r in report["instances"]] == [0.0] + [r["score"] for r in oracle_report["instances"][1:]]
 
 

@@ -13,7 +13,7 @@ from test_generate import CONFIG, shift_model
 from wsp_data.cli import main
 from wsp_eval.baselines import write_baseline
 from wsp_eval.generate import generate
-from wsp_eval.reference import reference_frames
+from wsp_eval.reference import reference_frames, reference_size
 from wsp_eval.video import read_video
 
 
@@ -33,6 +33,7 @@ def test_inputs_only_release_holds_no_reference(t1_release, tmp_path, capsys):
 
     first = cv2.cvtColor(cv2.imread(str(inputs / CONFIG / "inputs" / "first_frames" / f"{ep}.png")), cv2.COLOR_BGR2RGB)
     assert np.array_equal(first, full)
+    assert reference_size(inputs / CONFIG) == reference_size(t1_release / CONFIG) == full.shape[:2]  # PNG, info.json
     assert main(["baseline", "oracle", "--release", str(inputs), "--out", str(tmp_path / "o")]) == 2
     assert "inputs-only release holds no reference frames" in capsys.readouterr().err
 

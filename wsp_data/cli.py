@@ -173,8 +173,9 @@ def _score_options(p: argparse.ArgumentParser) -> None:
                                      "local Ray instance with --workers CPUs")
     p.add_argument("--allow-missing", action="store_true", help="score missing or unusable videos as 0")
     p.add_argument("--accept-lossy", action="store_true",
-                   help="score lossy or chroma-subsampled videos instead of refusing them (the report says so; "
-                        "such scores are not comparable: codec noise lowers T1 most)")
+                   help="score lossy or chroma-subsampled videos, and videos at another resolution than their "
+                        "reference's, instead of refusing them (the report says so; such scores are not comparable: "
+                        "codec noise lowers T1 most, resampling T1-T3)")
     p.add_argument("--flow", choices=FLOW, default="dis")
     p.add_argument("--no-flow-cache", action="store_true",
                    help="recompute the reference flows instead of reusing the release's reference-flow cache")

@@ -202,8 +202,9 @@ def per_episode(produce: Producer) -> BatchProducer:
     return lambda ctxs: [produce(ctx) for ctx in ctxs]
 
 
-def check_frames(frames: object, num_frames: int, where: str) -> np.ndarray:
-    """`frames` as (num_frames, H, W, 3) uint8, or a GenerateError naming `where` and what is wrong."""
+def check_frames(frames: object, num_frames: int, where: str, size: tuple[int, int] | None = None) -> np.ndarray:
+    """`frames` as (num_frames, H, W, 3) uint8 — (H, W) = `size` when given, the reference's — or a GenerateError
+    naming `where` and what is wrong."""
     try:
         arr = np.asarray(frames)
     except (TypeError, ValueError, RuntimeError) as e:
@@ -214,6 +215,10 @@ def check_frames(frames: object, num_frames: int, where: str) -> np.ndarray:
         raise GenerateError(f"{where}: frames of shape {arr.shape}; expected (N, H, W, 3)")
     if len(arr) != num_frames:
         raise GenerateError(f"{where}: {len(arr)} frames; the reference horizon is {num_frames}")
+    if size is not None and arr.shape[1:3] != tuple(size):
+        raise GenerateError(f"{where}: frames of {arr.shape[2]}×{arr.shape[1]} pixels; the reference frame is "
+                            f"{size[1]}×{size[0]}: return frames at its resolution (resample in the model's "
+                            "adapter; scoring refuses other resolutions, docs/validity.md §5)")
     if arr.dtype == np.uint8:
         return arr
     if not np.isfinite(arr).all():
@@ -240,7 +245,8 @@ def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]
         raise GenerateError(f"{where}: asked for {len(items)} video(s), returned {got}; a batched model returns a "
                             "list with one frame array per request, in order")
     for frames, (ctx, path) in zip(batch, items):
-        frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}")
+        frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}",
+                              ctx.first_frame().shape[:2])
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.stem}.partial{path.suffix}")  # keeps .mp4: the muxer goes by the suffix
         try:

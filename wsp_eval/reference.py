@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_eval.release_format import MASK_COLUMN, ROBOT_MASKS
+from wsp_eval.release_format import FIRST_FRAME, MASK_COLUMN, ROBOT_MASKS
 from wsp_eval.video import VideoError
 
 
@@ -33,6 +33,23 @@ def video_key_of(info: dict) -> str:
     if len(keys) != 1:
         raise VideoError(f"expected one video feature in meta/info.json, found {keys}")
     return keys[0]
+
+
+def reference_size(config_dir: Path) -> tuple[int, int] | None:
+    """(H, W) of a config's reference video (its one camera), from `meta/info.json`, or in an inputs-only
+    release from a first frame's PNG header; None where neither is there."""
+    config_dir = Path(config_dir)
+    info = config_dir / "meta" / "info.json"
+    if info.is_file():
+        meta = json.loads(info.read_text())
+        h, w = meta["features"][video_key_of(meta)]["shape"][:2]
+        return int(h), int(w)
+    first = next(iter(sorted((config_dir / Path(FIRST_FRAME).parent).glob("*.png"))), None)
+    if first is None:
+        return None
+    with open(first, "rb") as f:  # PNG: the IHDR chunk's width and height follow the 16-byte signature + header
+        header = f.read(24)
+    return int.from_bytes(header[20:24], "big"), int.from_bytes(header[16:20], "big")
 
 
 def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:

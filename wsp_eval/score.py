@@ -7,13 +7,14 @@
 - CIs: `BOOTSTRAP` resamples of the instances (within groups for a balanced suite), percentile interval,
   fixed RNG seed; Overall and macro CIs combine the suites' resamples index by index.
 - A missing or unusable video (missing, unreadable, not a video, over the size cap, wrong frame count, absurd
-  fps, a resolution unlike its instance's other videos) is a *problem*, found per file in bounded memory. Without
+  fps, a resolution other than the reference's, or unlike its instance's other videos) is a *problem*, found per file in bounded memory. Without
   `allow_missing` a missing file stops scoring before it starts and a broken one stops it at the end (the
   finished instances are cached); with it, the seed of every affected instance scores 0 and the report
   counts and lists the problems.
-- Encoding: a lossy or chroma-subsampled video is a problem (`wsp_eval.video.encoding_problem`, docs/validity.md);
-  `accept_lossy` scores it anyway, and the report says the encoding check was off (such scores are not
-  comparable with others: codec noise lowers T1 most).
+- Encoding: a lossy or chroma-subsampled video, or one at another resolution than its reference's, is a problem
+  (`wsp_eval.video.encoding_problem`, `submission.RESAMPLED`, docs/validity.md §5); `accept_lossy` scores it
+  anyway, and the report says the encoding check was off (such scores are not comparable with others: codec
+  noise lowers T1 most, resampling T1–T3).
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
   submission, release, backends and `SCORING_VERSION` skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
@@ -41,17 +42,21 @@ from wsp_eval import backends as backend_registry
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
+from wsp_eval.reference import reference_size
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release, split_config
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
-SCORING_VERSION = 5  # what the scores mean, in the report and the resume cache's key (a cache of an older version
+SCORING_VERSION = 6  # what the scores mean, in the report and the resume cache's key (a cache of an older version
 #   is discarded): bump it with every metric change. 2: T4's colour-region object tracker (docs/validity.md §2);
 #   3: T5's learned judge version 2, trained with twice the LIBERO references (docs/validity.md §1);
 #   4: T5's judge version 3: ALOHA's clips judged by weights trained on ALOHA (ManiSkill and LIBERO unchanged);
-#   5: T4's colour region places a partly hidden object by an occlusion-aware fit (docs/validity.md §2)
+#   5: T4's colour region places a partly hidden object by an occlusion-aware fit (docs/validity.md §2);
+#   6: a video at another resolution than its reference's is refused (scored only with accept_lossy; §5)
+ENCODING_ON = "lossless at the reference resolution only"  # the report's `encoding_check`
+ENCODING_OFF = "off (lossy or resampled videos scored)"
 BOOTSTRAP = 1000  # resamples for the 95% CIs
 COPY_MAD = 0.5  # grey levels: a video closer than this to its reference (mean absolute difference) equals it
 COPY_SHARE = 0.9  # a submission whose videos equal their references this often is flagged as a probable copy
@@ -75,6 +80,7 @@ class Job:
     seeds: tuple[int, ...]
     accept_lossy: bool = False
     flow_cache: str | None = None  # the release's reference-flow cache folder (`wsp_eval.flow_cache`), if used
+    size: tuple[int, int] | None = None  # (H, W) of the config's reference video: the resolution required
 
 
 # -- one instance -----------------------------------------------------------------------------------------------
@@ -100,7 +106,7 @@ def _load_seed(job: Job, seed: int) -> tuple[dict[str, tuple[np.ndarray, float]]
     one is missing or unusable or when they differ in resolution."""
     videos, rels, problems = {}, {}, []
     for role, episode_id, n in zip(job.row["roles"], job.row["episode_ids"], job.row["num_frames"]):
-        exp = Expected(job.config, episode_id, seed, n, job.row["fps"])
+        exp = Expected(job.config, episode_id, seed, n, job.row["fps"], size=job.size)
         video, problem = _load(Path(job.submission) / exp.relpath, exp, exp.relpath, job.accept_lossy)
         if problem:
             problems.append(problem)
@@ -237,7 +243,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     if flow_cache and backends.flow is not None:
         folder = cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}")
         flows = str(folder) if folder else None
-    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows)
+    sizes = {c: reference_size(release / c) for c in configs}
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, sizes[c])
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
     bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress,
@@ -277,7 +284,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
                  "code_version": str(rel_meta.get("code_version", "")),
                  "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
         backends=backends.describe(), reference_flow_cache=flows,
-        allow_missing=allow_missing, encoding_check="off (lossy videos scored)" if accept_lossy else "lossless only",
+        allow_missing=allow_missing, encoding_check=ENCODING_OFF if accept_lossy else ENCODING_ON,
         problems=problems, copy_check=copy_check(records),
         timing={"seconds": time.perf_counter() - start, "workers": workers, "executor": executor,
                 "instances": len(todo)},

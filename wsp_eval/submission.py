@@ -5,7 +5,7 @@
 
 `validate` lists every problem at once, each naming the file: missing or extra files, unreadable or
 truncated videos, lossy or chroma-subsampled encodings (`wsp_eval.video.encoding_problem`), zero frames, a frame count other than the reference horizon, a side over `MAX_SIDE`,
-videos of one instance at different resolutions, constant videos, fps missing or absurd, links (a
+a resolution other than the reference's (`RESAMPLED`), videos of one instance at different resolutions, constant videos, fps missing or absurd, links (a
 submission holds plain files only; a link pointing outside it is named as such), a submission.json over
 `MAX_MANIFEST_BYTES` or malformed, and a benchmark version that does not match the release. It never raises
 on bad input, and decoding is bounded (`wsp_eval.video.read_video`): one video at a time, refused from its
@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
+from wsp_eval.reference import reference_size
 from wsp_eval.release_format import INSTANCES, RELEASE_JSON
 from wsp_eval.video import MAX_FPS, MIN_FPS, VideoError, read_video
 
@@ -31,6 +32,8 @@ VIDEO_NAME = "seed{seed}.mp4"
 REQUIRED_KEYS = {"model": str, "benchmark_version": str, "seeds": list}
 TRAIN_PREFIX = "train_"
 MAX_MANIFEST_BYTES = 1 << 20  # submission.json holds a few short fields; a larger one is refused unread
+RESAMPLED = ("export at the reference's resolution (a resampled oracle loses up to 5 points of T1-T3, "
+             "docs/validity.md §5), or score it anyway with `wsp score --accept-lossy`")
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,7 @@ class Expected:
     num_frames: int
     fps: float
     instance_id: str = ""
+    size: tuple[int, int] | None = None  # (H, W) of the reference video; None: not checked
 
     @property
     def relpath(self) -> str:
@@ -69,9 +73,10 @@ def expected_videos(release: Path, configs: list[str], seeds: list[int]) -> list
     for config in configs:
         columns = ["instance_id", "episode_ids", "num_frames", "fps"]
         table = pq.read_table(Path(release) / config / INSTANCES, columns=columns)
+        size = reference_size(Path(release) / config)
         for instance, ids, frames, fps in zip(*(table.column(c).to_pylist() for c in columns)):
             for episode_id, n in zip(ids, frames):
-                out.extend(Expected(config, episode_id, s, n, fps, instance) for s in seeds)
+                out.extend(Expected(config, episode_id, s, n, fps, instance, size) for s in seeds)
     return out
 
 
@@ -130,8 +135,8 @@ def _links(sub: Path) -> list[Problem]:
 def load_video(path: Path, exp: Expected, rel: str, *, accept_lossy: bool = False
                ) -> tuple[tuple[np.ndarray, float] | None, list[Problem]]:
     """Decode a submitted video once, bounded by the reference horizon and `MAX_SIDE` (`read_video`) and, unless
-    `accept_lossy`, refused when its encoding is lossy (`wsp_eval.video.encoding_problem`): (frames, fps) when it
-    meets the contract, and its problems."""
+    `accept_lossy`, refused when its encoding is lossy (`wsp_eval.video.encoding_problem`) or its resolution is
+    not the reference's (`exp.size`): (frames, fps) when it meets the contract, and its problems."""
     if path.stat().st_size == 0:
         return None, [Problem(rel, "empty file (zero frames)")]
     try:
@@ -139,6 +144,9 @@ def load_video(path: Path, exp: Expected, rel: str, *, accept_lossy: bool = Fals
     except VideoError as e:
         return None, [Problem(rel, str(e).removeprefix(f"{path}: "))]
     problems = check_frames(frames, fps, exp, rel)
+    if not accept_lossy and exp.size and len(frames) and frames.shape[1:3] != tuple(exp.size):
+        (h, w), (rh, rw) = frames.shape[1:3], exp.size
+        problems.append(Problem(rel, f"{w}×{h} pixels; the references of {exp.config} are {rw}×{rh}: {RESAMPLED}"))
     return (None if problems else (frames, fps)), problems
 
 
