@@ -191,6 +191,8 @@ class PlatformKit(ABC):
         Returns:
             an expert source (`.trajectory(seed)`, `.replayer`, `.spec`, `.close()`); its trajectories are
             native action streams (T, D) float32 that replay to task success on the unrendered replayer.
+            Optionally `.scripted(seed)`: the stream before that verifying replay, for a builder whose next
+            step is a rendered replay that checks success itself (train), which then skips the unrendered one.
         Called:
             once per task per build worker (T1, T2, T3, train; T4 and T5 rigs may call it too).
         """

@@ -317,10 +317,14 @@ class AlohaExpertSource:
     def close(self) -> None:
         self.replayer.close()
 
+    def scripted(self, seed: int) -> np.ndarray | None:
+        """The scripted (T, 14) joint-target stream for scene `seed`, not yet replayed (None: out of time)."""
+        return script_stream(self.replayer, self.spec.name, seed)
+
     def trajectory(self, seed: int) -> np.ndarray | None:
         """The (T, 14) joint-target stream that solves the task at scene `seed`, or None if its replay fails."""
         if seed not in self._cache:
-            actions = script_stream(self.replayer, self.spec.name, seed)
+            actions = self.scripted(seed)
             ok = actions is not None and self.replayer.replay(seed, actions).success
             self._cache[seed] = actions if ok else None
         return self._cache[seed]

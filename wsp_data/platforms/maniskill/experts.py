@@ -365,12 +365,16 @@ class ExpertSource:
         self.script.close()
         self.replayer.close()
 
-    def trajectory(self, seed: int) -> np.ndarray | None:
-        """The verified (T, 8) joint stream for `seed`, or None when the script or its replay fails."""
+    def scripted(self, seed: int) -> np.ndarray | None:
+        """The scripted (T, 8) joint stream for `seed`, not yet replayed (None when the script fails)."""
         self.script.reset(seed)
         try:
             self.spec.solve(self.script)
         except Exception:  # noqa: BLE001 - an unsolvable seed (IK or geometry failure) is just a miss
             return None
-        actions = self.script.trajectory()
-        return actions if verify(self.replayer, seed, actions) else None
+        return self.script.trajectory()
+
+    def trajectory(self, seed: int) -> np.ndarray | None:
+        """The verified (T, 8) joint stream for `seed`, or None when the script or its replay fails."""
+        actions = self.scripted(seed)
+        return actions if actions is not None and verify(self.replayer, seed, actions) else None
