@@ -9,7 +9,9 @@ Per platform (each `t5_<platform>` config; `t4_<platform>` configs add the still
 - approach (the reference before first contact) and T4 references (distractor, false contact, spatial
   proximity): the object never moves, so never accepted (label, agent_ok and object_ok) as push, pull, drag, tap, knock-over or drop;
 - no_robot (the object moves, the robot held at its frame-0 pose): agent_ok must be False;
-- degraded references (JPEG q 40, Gaussian blur σ 1, 64×64 and back): full agreement, as for the originals.
+- degraded references (JPEG q 40, Gaussian blur σ 1, 64×64 and back): full agreement, as for the originals;
+- expert rollouts that are one primitive (`judge_data.EXPERT_PRIMITIVE`: ManiSkill's PushCube and PullCube source
+  rollouts, a push and a pull done the expert's way, not T5's): how far the verdicts carry beyond T5's scripts.
 Prints Markdown tables; `--out` keeps every verdict.
 """
 
@@ -26,7 +28,7 @@ import numpy as np
 
 from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES
-from wsp_eval.judge_data import t4_clips, t5_clips
+from wsp_eval.judge_data import KINDS, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -43,7 +45,8 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     out: dict[str, list[dict]] = defaultdict(list)
     for config in sorted(meta["configs"]):
         suite, platform = split_config(config)
-        clips = t5_clips(release, config) if suite == "t5" else t4_clips(release, config) if suite == "t4" else []
+        clips = (t5_clips(release, config, KINDS[:4] + ("expert",)) if suite == "t5"
+                 else t4_clips(release, config) if suite == "t4" else [])
         for c in clips:
             frames = c.judge_frames()
             variants = {c.kind: frames}
@@ -54,8 +57,9 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                 t = time.perf_counter()
                 v = judge.judge(fr, c.object_px, platform)
                 out[platform].append({"kind": kind, "instance_id": c.instance_id, "task": c.task, "seed": c.seed,
-                                      "intended": c.primitive, "label": v.label, "agent_ok": v.agent_ok,
-                                      "object_ok": v.object_ok, "seconds": time.perf_counter() - t})
+                                      "intended": c.primitive, "expected": c.label, "label": v.label,
+                                      "agent_ok": v.agent_ok, "object_ok": v.object_ok,
+                                      "seconds": time.perf_counter() - t})
     return out
 
 
@@ -87,6 +91,7 @@ def summarize(records: list[dict]) -> dict:
     for k in DEGRADE:
         s[f"full, {k}"] = rate(f"reference, {k}", lambda r: r["label"] == r["intended"] and r["agent_ok"]
                                and r["object_ok"])
+    s["expert_full"] = rate("expert", lambda r: r["label"] == r["expected"] and r["agent_ok"] and r["object_ok"])
     s["ms_per_clip"] = 1000 * float(np.median([r["seconds"] for r in records]))
     return s
 
@@ -112,6 +117,9 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
     for k in DEGRADE:
         good, n = s[f"full, {k}"]
         lines.append(f"| reference {k}: scores 100 | {good} / {n} (good) | as the originals |")
+    if s["expert_full"][1]:
+        lines.append(f"| task expert's rollout of one primitive (PushCube push, PullCube pull): scores 100 | "
+                     f"{'%d / %d' % s['expert_full']} (good) | all |")
     lines.append(f"\nMedian time per clip: {s['ms_per_clip']:.1f} ms.")
     return "\n".join(lines)
 

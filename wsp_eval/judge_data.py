@@ -10,6 +10,7 @@ simulator says it shows. Kinds (`Clip.kind`) and their targets (label, agent_ok,
 | `approach` | the reference up to the first contact: the robot moves, the object has not moved | None | None | False |
 | `no_robot` | the reference with the robot held at its frame-0 pose (robot mask pixels of frame t replaced by a background estimate, frame 0's robot pasted back): the object moves with no robot near it | None | False | None |
 | `t4` | a T4 reference (distractor, false contact, spatial proximity: the evaluated object never moves) | None | None | False |
+| `expert` | the instance's source rollout where the task's expert performs one primitive (`EXPERT_PRIMITIVE`: ManiSkill's PushCube pushes, PullCube pulls the cube ≈ 15 cm to its goal): a primitive as the task's expert does it, not as T5 scripts it | that primitive | True | True |
 
 `dense` keeps `DENSE` frames sampled uniformly (so training can jitter the 12 it takes); `judge_frames`
 takes the 12 a judge sees.
@@ -24,11 +25,13 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, frame_indices
+from wsp_eval.reference import reference_frames
 from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.suites.reference import InstanceReference
 
 DENSE = 2 * JUDGE_FRAMES
-KINDS = ("reference", "static", "approach", "no_robot", "t4")
+KINDS = ("reference", "static", "approach", "no_robot", "t4", "expert")
+EXPERT_PRIMITIVE = {"PushCube": "push", "PullCube": "pull"}  # tasks whose expert rollout is one primitive
 TARGETS = {"static": (None, False, False), "approach": (None, None, False), "no_robot": (None, False, None),
            "t4": (None, None, False)}
 MIN_APPROACH = 6  # frames before first contact needed for an approach clip
@@ -100,6 +103,10 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = KINDS[:4], lim
             idx = frame_indices(len(frames), DENSE)
             dense = without_robot(frames[idx], ref.masks("reference")[idx])
             out.append(Clip("no_robot", dense=dense, label=None, agent=False, object=None, **base))
+        primitive = EXPERT_PRIMITIVE.get(row["task"])
+        if "expert" in kinds and primitive and row.get("source_episode_index") is not None:
+            source = reference_frames(config_dir, int(row["source_episode_index"]))
+            out.append(Clip("expert", dense=_dense(source), label=primitive, agent=True, object=True, **base))
     return out
 
 
