@@ -42,7 +42,7 @@ from torch import nn
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
 from wsp_eval.backends.judge_net import CHANNELS, FRAME, at_frame_size, judge_input
-from wsp_eval.judge_data import DENSE, Clip, t4_clips, t5_clips
+from wsp_eval.judge_data import DENSE, KINDS, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
@@ -147,10 +147,13 @@ def at_judge_size(clip: Clip) -> Clip:
     return clip
 
 
-def load_clips(releases: list[Path]) -> list[Clip]:
-    """Every T4/T5 clip of the releases at the judge's frame size; a clip found in more than one release (the same
+def load_clips(releases: list[Path], expert: bool = False) -> list[Clip]:
+    """Every T4/T5 clip of the releases at the judge's frame size (with `expert`, the T5 source rollouts whose
+    task's expert performs one primitive too: kind `expert`); a clip found in more than one release (the same
     config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
-    once."""
+    once. A clip is known by its kind, instance, task, scene seed and build seed: slot k's scene seed is the same in
+    every build of a suite, so a build restricted to other tasks, or with another `--seed`, holds other clips."""
+    kinds = KINDS[:4] + (("expert",) if expert else ())
     clips, seen = [], set()
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())
@@ -162,9 +165,10 @@ def load_clips(releases: list[Path]) -> list[Clip]:
             if seed_range != "train":
                 sys.exit(f"{release}/{config}: built on the {seed_range or suite} seed range; the judge trains on "
                          "training-range seeds only (`wsp build --seed-range train`)")
-            found = t5_clips(release, config) if suite == "t5" else t4_clips(release, config)
-            new = [c for c in found if (c.kind, c.instance_id, c.seed) not in seen]
-            seen.update((c.kind, c.instance_id, c.seed) for c in new)
+            found = t5_clips(release, config, kinds) if suite == "t5" else t4_clips(release, config)
+            build_seed = info["build_config"].get("seed", 0)
+            new = [c for c in found if (c.kind, c.instance_id, c.task, c.seed, build_seed) not in seen]
+            seen.update((c.kind, c.instance_id, c.task, c.seed, build_seed) for c in new)
             print(f"{release}/{config}: {len(new)} clips ({len(found) - len(new)} already loaded)", flush=True)
             clips += [at_judge_size(c) for c in new]
     return clips
@@ -217,12 +221,15 @@ def main() -> None:
     ap.add_argument("--exclude-tasks", nargs="+", default=[], metavar="TASK",
                     help="development only: train without these tasks' clips (a leave-task-out check of how the judge "
                          "does on tasks it never saw; docs/validity.md §1)")
+    ap.add_argument("--expert", action="store_true",
+                    help="also train on the task experts' own primitives (T5 source rollouts of the tasks in "
+                         "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); ManiSkill's version 5")
     args = ap.parse_args()
     torch.manual_seed(SEED)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)
     cv2.setNumThreads(1)
-    clips = [c for c in load_clips(args.releases) if c.task not in args.exclude_tasks]
+    clips = [c for c in load_clips(args.releases, args.expert) if c.task not in args.exclude_tasks]
     if not clips:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
     held: list[Clip] = []
@@ -261,7 +268,7 @@ def main() -> None:
         "data": [data_record(r) for r in args.releases],
         "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
         "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
-        "excluded_tasks": args.exclude_tasks, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
+        "excluded_tasks": args.exclude_tasks, "expert": args.expert, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
         "weight_decay": WEIGHT_DECAY, "seed": SEED,
         "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
         "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),
