@@ -51,11 +51,33 @@ def test_the_packaged_weights_and_their_training_record(platform):
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("4 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("5 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
     custom = NetJudge(PLATFORM_WEIGHTS["aloha"])  # --judge-checkpoint: these weights judge every platform
     assert custom.judge(frames, (64.0, 64.0), "robotwin") == judge.judge(frames, (64.0, 64.0), "aloha")
+
+
+def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
+    """`scripts/ensemble_judge.py` (how ManiSkill's version 5 was made): one ONNX file whose logits are the mean of
+    its members' (here the LIBERO and ALOHA weights), with a record naming both; float32 sums, so to 1e-5."""
+    import subprocess
+
+    members = [PLATFORM_WEIGHTS["libero"], PLATFORM_WEIGHTS["aloha"]]
+    out = tmp_path / "ensemble.onnx"
+    run = subprocess.run([sys.executable, "scripts/ensemble_judge.py", *map(str, members), "--out", str(out)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    record = json.loads(out.with_suffix(".json").read_text())
+    assert [m["weights"] for m in record["ensemble_of"]] == [m.name for m in members]
+    assert record["sha256"] == hashlib.sha256(out.read_bytes()).hexdigest()
+    ref = next(c for c in clips if c.kind == "reference")
+    both = [NetJudge(m).logits(ref.judge_frames(), ref.object_px) for m in members]
+    mean = NetJudge(out).logits(ref.judge_frames(), ref.object_px)
+    assert not np.allclose(both[0], both[1], atol=1e-2)  # the members differ, so the mean is a real check
+    assert np.allclose(mean, (both[0] + both[1]) / 2, atol=1e-5)
+    assert subprocess.run([sys.executable, "scripts/ensemble_judge.py", str(members[0]), "--out", str(out)],
+                          capture_output=True, text=True, timeout=120).returncode != 0  # one member: refused
 
 
 def test_input_and_determinism(judge, clips):

@@ -18,9 +18,9 @@ most likely primitive, and a boolean is true when its probability is ≥ 0.5. De
 thread, fixed preprocessing.
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
-by the config's platform (never by anything in the submission): ManiSkill's own (version 4), LIBERO's from version
-2 (trained on ManiSkill and LIBERO clips), ALOHA's own (version 3). A platform without weights is refused with a
-message.
+by the config's platform (never by anything in the submission): ManiSkill's own (version 5: one file holding two
+networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's from version 2 (trained on ManiSkill
+and LIBERO clips), ALOHA's own (version 3). A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "4"
+NAME, VERSION = "net", "5"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
-PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v4_maniskill.onnx",
+PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v5_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v2.onnx",
                     "aloha": WEIGHTS_DIR / "judge_net_v3_aloha.onnx"}
 FRAME, SIDE = 128, 64
