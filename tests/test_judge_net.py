@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from wsp_eval.backends.judge_net import CHANNELS, PLATFORM_WEIGHTS, SIDE, NetJud
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
+ENSEMBLE = str(Path(__file__).resolve().parents[1] / "scripts" / "ensemble_judge.py")
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +67,7 @@ def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
 
     members = [PLATFORM_WEIGHTS["libero"], PLATFORM_WEIGHTS["aloha"]]
     out = tmp_path / "ensemble.onnx"
-    run = subprocess.run([sys.executable, "scripts/ensemble_judge.py", *map(str, members), "--out", str(out)],
+    run = subprocess.run([sys.executable, ENSEMBLE, *map(str, members), "--out", str(out)],
                          capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr
     record = json.loads(out.with_suffix(".json").read_text())
@@ -76,7 +78,7 @@ def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     mean = NetJudge(out).logits(ref.judge_frames(), ref.object_px)
     assert not np.allclose(both[0], both[1], atol=1e-2)  # the members differ, so the mean is a real check
     assert np.allclose(mean, (both[0] + both[1]) / 2, atol=1e-5)
-    assert subprocess.run([sys.executable, "scripts/ensemble_judge.py", str(members[0]), "--out", str(out)],
+    assert subprocess.run([sys.executable, ENSEMBLE, str(members[0]), "--out", str(out)],
                           capture_output=True, text=True, timeout=120).returncode != 0  # one member: refused
 
 
