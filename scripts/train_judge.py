@@ -18,6 +18,9 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
     wsp build --platform aloha --suite t4 --seed-range train --count 48  --workers 2 --out judge-train-aloha
     .venv/bin/python scripts/train_judge.py judge-train-aloha --out wsp_eval/backends/weights/judge_net_v3_aloha.onnx
 
+    # ManiSkill's version 5 (two trainings, one with --expert, averaged by scripts/ensemble_judge.py): the
+    # commands are in docs/judge.md, "ManiSkill's weights, version 5"
+
 Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
 the approach before first contact (object false), the robot held still while the object moves (agent false),
 and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
