@@ -28,7 +28,7 @@ import numpy as np
 
 from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES
-from wsp_eval.judge_data import KINDS, t4_clips, t5_clips
+from wsp_eval.judge_data import T5_KINDS, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -45,7 +45,7 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     out: dict[str, list[dict]] = defaultdict(list)
     for config in sorted(meta["configs"]):
         suite, platform = split_config(config)
-        clips = (t5_clips(release, config, KINDS[:4] + ("expert",)) if suite == "t5"
+        clips = (t5_clips(release, config, (*T5_KINDS, "expert")) if suite == "t5"
                  else t4_clips(release, config) if suite == "t4" else [])
         for c in clips:
             frames = c.judge_frames()

@@ -45,7 +45,7 @@ from torch import nn
 
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
 from wsp_eval.backends.judge_net import CHANNELS, FRAME, at_frame_size, judge_input
-from wsp_eval.judge_data import DENSE, KINDS, Clip, t4_clips, t5_clips
+from wsp_eval.judge_data import DENSE, T5_KINDS, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
@@ -156,7 +156,7 @@ def load_clips(releases: list[Path], expert: bool = False) -> list[Clip]:
     config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
     once. A clip is known by its kind, instance, task, scene seed and build seed: slot k's scene seed is the same in
     every build of a suite, so a build restricted to other tasks, or with another `--seed`, holds other clips."""
-    kinds = KINDS[:4] + (("expert",) if expert else ())
+    kinds = T5_KINDS + (("expert",) if expert else ())
     clips, seen = [], set()
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())

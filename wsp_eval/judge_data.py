@@ -30,10 +30,8 @@ from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.suites.reference import InstanceReference
 
 DENSE = 2 * JUDGE_FRAMES
-KINDS = ("reference", "static", "approach", "no_robot", "t4", "expert")
+T5_KINDS = ("reference", "static", "approach", "no_robot")  # `t5_clips`' default; `expert` on request
 EXPERT_PRIMITIVE = {"PushCube": "push", "PullCube": "pull"}  # tasks whose expert rollout is one primitive
-TARGETS = {"static": (None, False, False), "approach": (None, None, False), "no_robot": (None, False, None),
-           "t4": (None, None, False)}
 MIN_APPROACH = 6  # frames before first contact needed for an approach clip
 
 
@@ -78,7 +76,7 @@ def without_robot(frames: np.ndarray, masks: np.ndarray) -> np.ndarray:
     return out
 
 
-def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = KINDS[:4], limit: int | None = None) -> list[Clip]:
+def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limit: int | None = None) -> list[Clip]:
     """The clips of every instance of a T5 config."""
     config_dir = Path(release) / config
     rows = pq.read_table(config_dir / INSTANCES).to_pylist()[:limit]
