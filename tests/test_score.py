@@ -19,8 +19,10 @@ import pyarrow.parquet as pq
 import pytest
 
 from wsp_eval.baselines import write_baseline
-from wsp_eval.score import (BOOTSTRAP, CACHE, CACHE_KEY, SCORING_VERSION, ScoreError, aggregate,
+from wsp_eval.reference import reference_frames
+from wsp_eval.score import (BOOTSTRAP, CACHE, CACHE_KEY, COPY_MAD, SCORING_VERSION, ScoreError, aggregate,
                             score_submission)
+from wsp_eval.suites.reference import InstanceReference
 
 
 def _sub(release, tmp_path_factory, name: str):
@@ -168,21 +170,61 @@ def test_overall_and_macro_average():
     assert BOOTSTRAP >= 1000
 
 
-def test_reference_flow_cache_is_reused_exactly(suites_scores, suites_release, tmp_path):
-    """RMFA's reference side is computed once per release and flow backend (`wsp_eval.flow_cache`): a later
-    scoring reads the entries without rewriting them, a damaged entry is recomputed, and the scores equal, bit
-    for bit, a scoring that recomputes every reference flow."""
+def test_reference_caches_are_reused_exactly(suites_scores, suites_release, tmp_path):
+    """The reference side is computed once per release and evaluator: RMFA's reference flows (T2, T3;
+    `wsp_eval.flow_cache`) and T4's and T5's results on the reference (`wsp_eval.reference_cache`). A later
+    scoring reads the entries without rewriting them, a damaged entry is recomputed, and the scores (and T5's
+    verdicts on the references) equal, bit for bit, a scoring that recomputes the whole reference side."""
     sub, report = suites_scores["static"]
     folder = Path(report["reference_flow_cache"])  # this scoring's own cache folder (release × flow backend)
-    entries = sorted(folder.glob("t[23]_maniskill/*.npz"))
-    assert {p.parent.name for p in entries} == {"t2_maniskill", "t3_maniskill"}  # written by the fixture's scoring
+    flows = sorted(folder.glob("t[23]_maniskill/*.npz"))
+    assert {p.parent.name for p in flows} == {"t2_maniskill", "t3_maniskill"}  # written by the fixture's scoring
+    results = sorted(p for c in ("t4_maniskill", "t5_maniskill")
+                     for p in Path(report["reference_result_cache"][c], c).glob("*.json"))
+    assert len(results) == report["platforms"]["maniskill"]["suites"]["t4"]["n"] + \
+        report["platforms"]["maniskill"]["suites"]["t5"]["n"]  # one entry per T4 and T5 instance
+    entries = flows + results
     stamps = {p: p.stat().st_mtime_ns for p in entries}
-    entries[0].write_bytes(b"not a zip")  # a damaged entry
+    damaged = (flows[0], results[0], results[-1])  # a flow, a T4 result, a T5 result
+    for p in damaged:
+        p.write_bytes(b"not a cache entry")
     cached = score_submission(sub, suites_release, tmp_path / "cached", progress=False)
-    np.load(entries[0]).close()  # rewritten, readable
-    assert all(p.stat().st_mtime_ns == stamps[p] for p in entries[1:])  # read, not recomputed
-    fresh = score_submission(sub, suites_release, tmp_path / "fresh", progress=False, flow_cache=False)
+    np.load(flows[0]).close()  # rewritten, readable
+    assert all(json.loads(p.read_text()) for p in damaged[1:])
+    assert all(p.stat().st_mtime_ns == stamps[p] for p in entries if p not in damaged)  # read, not recomputed
+    fresh = score_submission(sub, suites_release, tmp_path / "fresh", progress=False, reference_cache=False)
+    assert "reference_result_cache" in fresh and not fresh["reference_result_cache"]
 
     def scores(report):
-        return [(r["instance_id"], r["score"], [s.get("windows") for s in r["seeds"]]) for r in report["instances"]]
+        return [(r["instance_id"], r["score"], r.get("reference"), [s.get("windows") for s in r["seeds"]])
+                for r in report["instances"]]
     assert scores(cached) == scores(fresh)
+
+
+def test_the_copy_check_decides_exactly_as_the_mean_absolute_difference(suites_release):
+    """The copy check (`InstanceReference.equals`) decodes the reference only until the differences summed so far
+    reach COPY_MAD over the whole video; it must decide exactly as mean |video − reference| < COPY_MAD does, with
+    or without the reference decoded beforehand: differences summing to one grey level below that budget are a
+    copy, at the budget not, and a video unlike its reference is decided without decoding all of it."""
+    config = suites_release / "t4_maniskill"
+    row = pq.read_table(config / "instances.parquet").to_pylist()[0]
+    reference = reference_frames(config, row["episode_indices"][0])
+    assert reference.size % 2 == 0
+    budget = reference.size // 2  # COPY_MAD = 0.5 grey levels per value, summed over every value
+
+    def off_by_one(count: int) -> np.ndarray:  # `count` values changed by one grey level, none wraps
+        video = reference.copy()
+        flat = video.reshape(-1)
+        flat[:count] = np.where(flat[:count] < 255, flat[:count] + 1, flat[:count] - 1)
+        return video
+
+    assert COPY_MAD == 0.5
+    cases = [(reference.copy(), True), (off_by_one(budget - 1), True), (off_by_one(budget), False),
+             (reference[:-1].copy(), False), (255 - reference, False)]
+    for video, is_copy in cases:
+        streamed = InstanceReference(config, row)
+        assert streamed.equals("reference", video, COPY_MAD) is is_copy
+        assert (("frames", "reference") in streamed._cache) is is_copy  # kept only when decoded to its end
+        decoded = InstanceReference(config, row)
+        decoded.frames("reference")
+        assert decoded.equals("reference", video, COPY_MAD) is is_copy

@@ -177,8 +177,9 @@ def _score_options(p: argparse.ArgumentParser) -> None:
                         "reference's, instead of refusing them (the report says so; such scores are not comparable: "
                         "codec noise lowers T1 most, resampling T1-T3)")
     p.add_argument("--flow", choices=FLOW, default="dis")
-    p.add_argument("--no-flow-cache", action="store_true",
-                   help="recompute the reference flows instead of reusing the release's reference-flow cache")
+    p.add_argument("--no-reference-cache", action="store_true",
+                   help="recompute the reference side (T2/T3 reference flows, T4/T5 results on the references) "
+                        "instead of reusing the release's reference caches")
     p.add_argument("--flow-checkpoint", help="local checkpoint for --flow dpflow")
     p.add_argument("--tracker", choices=TRACKER, default="lk")
     p.add_argument("--tracker-checkpoint", help="local checkpoint for --tracker tapnext")
@@ -314,7 +315,7 @@ def _score(submission: Path, release: Path, out: Path, args) -> dict:
     try:
         return score_submission(submission, release, out, spec=_spec(args), workers=args.workers,
                                 allow_missing=args.allow_missing, accept_lossy=args.accept_lossy,
-                                progress=not args.quiet, flow_cache=not args.no_flow_cache,
+                                progress=not args.quiet, reference_cache=not args.no_reference_cache,
                                 executor=args.executor, address=args.address)
     except (ScoreError, BackendUnavailable) as e:
         raise CliError(str(e)) from None

@@ -13,9 +13,6 @@ one of another length, is recomputed and rewritten; no writable place only costs
 
 from __future__ import annotations
 
-import hashlib
-import os
-import tempfile
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
@@ -24,33 +21,18 @@ import numpy as np
 
 from wsp_eval import flow
 from wsp_eval.flow import ReferenceFlows, sample_times
-from wsp_eval.release_format import RELEASE_JSON
+from wsp_eval.reference_cache import cache_folder, write_atomic
 
 FORMAT = 1  # bump when an entry's layout changes
-SUBDIR = Path(".cache") / "reference_flows"
+KIND = "reference_flows"
 ENTRY = "{episode:06d}_{samples}samples.npz"
 
 
 def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path | None:
     """This release's and backend's cache folder (created), in the release when writable, else the user's cache;
     None when neither can be written (scoring then recomputes the flows)."""
-    release = Path(release)
-    h = hashlib.sha256((release / RELEASE_JSON).read_bytes())
-    h.update(f"\0{backend_name}\0{backend_version}\0{FORMAT}\0".encode())
-    h.update(Path(flow.__file__).read_bytes())
-    key = h.hexdigest()[:24]
-    user = os.environ.get("XDG_CACHE_HOME") or (os.environ.get("HOME") and Path(os.environ["HOME"]) / ".cache")
-    bases = [release / SUBDIR] + ([Path(user) / "worldsimprobe" / "reference_flows"] if user else [])
-    for base in bases:
-        folder = base / key
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.NamedTemporaryFile(dir=folder, prefix=".write-test"):
-                pass
-            return folder
-        except OSError:
-            continue
-    return None
+    parts = [f"{backend_name}\0{backend_version}\0{FORMAT}\0".encode(), Path(flow.__file__).read_bytes()]
+    return cache_folder(release, KIND, parts)
 
 
 def load_or_compute(folder: Path, config: str, episode: int, duration: float,
@@ -66,14 +48,5 @@ def load_or_compute(folder: Path, config: str, episode: int, duration: float,
     except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError):
         pass  # absent or damaged: compute it
     flows = compute()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".partial.npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, flows=flows.flows, masks=flows.masks)
-        os.replace(tmp, path)
-    except OSError:
-        pass  # a full disk costs the cache, never the score
-    finally:
-        Path(tmp).unlink(missing_ok=True)
+    write_atomic(path, lambda f: np.savez(f, flows=flows.flows, masks=flows.masks), ".npz")
     return flows

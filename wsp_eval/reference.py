@@ -6,6 +6,7 @@ from __future__ import annotations
 import glob
 import io
 import json
+from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 
@@ -52,8 +53,9 @@ def reference_size(config_dir: Path) -> tuple[int, int] | None:
     return int.from_bytes(header[20:24], "big"), int.from_bytes(header[16:20], "big")
 
 
-def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
-    """The reference video of one episode, RGB uint8 (length, H, W, 3), decoded from its shared file."""
+def iter_reference_frames(config_dir: Path, episode_index: int) -> Iterator[np.ndarray]:
+    """The reference video of one episode, frame by frame (RGB uint8 (H, W, 3)), decoded from its shared file
+    only as far as the caller reads; a VideoError when the file is unreadable or holds too few frames."""
     import av
 
     config_dir = Path(config_dir)
@@ -65,7 +67,7 @@ def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
                                                   file_index=ep[f"{key}/file_index"])
     start, fps, n = ep[f"{key}/from_timestamp"], info["fps"], ep["length"]
     first = int(round(start * fps))
-    frames = []
+    found = 0
     try:
         with av.open(str(path)) as container:
             stream = container.streams.video[0]
@@ -75,25 +77,32 @@ def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
                 if j >= first + n:
                     break
                 if j >= first:
-                    frames.append(f.to_ndarray(format="rgb24"))
+                    found += 1
+                    yield f.to_ndarray(format="rgb24")
     except av.error.FFmpegError as e:
         raise VideoError(f"{path}: unreadable reference video ({e})") from e
-    if len(frames) != n:
-        raise VideoError(f"{path}: episode {episode_index} has {len(frames)} decodable frames, expected {n}")
-    return np.stack(frames)
+    if found != n:
+        raise VideoError(f"{path}: episode {episode_index} has {found} decodable frames, expected {n}")
 
 
-def reference_masks(config_dir: Path, episode_index: int) -> np.ndarray:
-    """The robot label masks of one episode (length, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers."""
+def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
+    """The reference video of one episode, RGB uint8 (length, H, W, 3), decoded from its shared file."""
+    return np.stack(list(iter_reference_frames(config_dir, episode_index)))
+
+
+def reference_masks(config_dir: Path, episode_index: int, first_only: bool = False) -> np.ndarray:
+    """The robot label masks of one episode (length, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers; with
+    `first_only`, frame 0's alone (1, H, W)."""
     from PIL import Image
 
     path = Path(config_dir) / ROBOT_MASKS
     if not path.exists():
         raise VideoError(f"{path}: missing; releases before format 0.2.0 kept the masks elsewhere: rebuild the "
                          "release with this version of worldsimprobe")
-    t = pq.read_table(path, columns=["frame_index", MASK_COLUMN], filters=[("episode_index", "==", episode_index)])
+    filters = [("episode_index", "==", episode_index)] + ([("frame_index", "==", 0)] if first_only else [])
+    t = pq.read_table(path, columns=["frame_index", MASK_COLUMN], filters=filters)
     cells = t.sort_by("frame_index").column(MASK_COLUMN).to_pylist()
-    n = episodes(Path(config_dir))[episode_index]["length"]
+    n = 1 if first_only else episodes(Path(config_dir))[episode_index]["length"]
     if len(cells) != n:
         raise VideoError(f"{path}: episode {episode_index} has {len(cells)} masks, expected {n}")
     return np.stack([np.asarray(Image.open(io.BytesIO(c))) for c in cells])

@@ -22,8 +22,10 @@
   Tasks carry paths, not videos: every node reads the release, the submission and the reference-flow cache at
   the same paths (a shared file system, or the same copy on each node), which is cheaper than shipping
   gigabytes of video through Ray's object store.
-- Reference flows (T2, T3) are computed once per release and flow backend and reused by later scorings of any
-  submission (`wsp_eval.flow_cache`); `flow_cache=False` recomputes them.
+- The reference side is computed once per release and evaluator and reused by later scorings of any submission:
+  RMFA's reference flows (T2, T3; `wsp_eval.flow_cache`) and T4's and T5's results on the reference
+  (`wsp_eval.reference_cache`); `reference_cache=False` recomputes them. The copy check decodes a reference only
+  until the video is known to differ from it.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
 from wsp_eval.reference import reference_size
+from wsp_eval.reference_cache import results_folder
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release, split_config
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
@@ -82,6 +85,7 @@ class Job:
     seeds: tuple[int, ...]
     accept_lossy: bool = False
     flow_cache: str | None = None  # the release's reference-flow cache folder (`wsp_eval.flow_cache`), if used
+    result_cache: str | None = None  # the suite's reference-result cache folder (`wsp_eval.reference_cache`), if used
     size: tuple[int, int] | None = None  # (H, W) of the config's reference video: the resolution required
 
 
@@ -124,7 +128,8 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
     module = SCORERS[suite]
     backends = _backends(spec, module.NEEDS)
     ref = InstanceReference(Path(job.release) / job.config, job.row,
-                            flow_cache=Path(job.flow_cache) if job.flow_cache else None)
+                            flow_cache=Path(job.flow_cache) if job.flow_cache else None,
+                            result_cache=Path(job.result_cache) if job.result_cache else None)
     prepared = module.prepare(ref, backends)
     seeds, problems = [], []
     for seed in job.seeds:
@@ -145,11 +150,7 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
 
 def _is_copy(ref: InstanceReference, videos: dict[str, tuple[np.ndarray, float]]) -> bool:
     """Whether every video of a seed is its reference, frame for frame (mean absolute difference < COPY_MAD)."""
-    for role, (frames, _) in videos.items():
-        reference = ref.frames(role)
-        if frames.shape != reference.shape or np.abs(frames.astype(np.int16) - reference).mean() >= COPY_MAD:
-            return False
-    return True
+    return all(ref.equals(role, frames, COPY_MAD) for role, (frames, _) in videos.items())
 
 
 def copy_check(records: list[dict]) -> dict:
@@ -168,6 +169,29 @@ def _worker(args: tuple[Job, BackendSpec]) -> dict:
 
 
 # -- the run ----------------------------------------------------------------------------------------------------
+def _flow_cache(release: Path, spec: BackendSpec, backends: Backends) -> str | None:
+    """The release's reference-flow cache folder for this flow backend, or None (no flow backend, or nowhere to
+    write)."""
+    if backends.flow is None:
+        return None
+    folder = cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}")
+    return str(folder) if folder else None
+
+
+def _result_cache(release: Path, config: str, spec: BackendSpec) -> str | None:
+    """The reference-result cache folder of a config's suite, or None: for a suite without reference-side results,
+    or when a backend it uses may answer differently over time (`cacheable` False: a remote VLM)."""
+    suite = split_config(config)[0]
+    module = SCORERS[suite]
+    if not module.REFERENCE_RESULTS:
+        return None
+    backends = _backends(spec, module.NEEDS)
+    if not all(getattr(getattr(backends, role), "cacheable", True) for role in module.NEEDS):
+        return None
+    folder = results_folder(release, suite, backends.describe(), spec.to_json())
+    return str(folder) if folder else None
+
+
 def _rows(release: Path, config: str) -> list[dict]:
     return pq.read_table(release / config / INSTANCES).to_pylist()
 
@@ -219,10 +243,11 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
 
 def score_submission(submission: Path, release: Path, out: Path, *, spec: BackendSpec = BackendSpec(),
                      workers: int = 1, allow_missing: bool = False, accept_lossy: bool = False,
-                     progress: bool = True, flow_cache: bool = True, executor: str = "local",
+                     progress: bool = True, reference_cache: bool = True, executor: str = "local",
                      address: str | None = None) -> dict:
     """Score `submission` against `release`; write the reports under `out`; return the report dict. With
-    `flow_cache`, RMFA's reference flows come from (and go to) the release's reference-flow cache. `executor`
+    `reference_cache`, the reference side (RMFA's reference flows; T4's and T5's results on the reference) comes
+    from (and goes to) the release's reference caches. `executor`
     "ray" scores on a Ray cluster (`address`, or a local instance with `workers` CPUs)."""
     from tqdm import tqdm
 
@@ -241,12 +266,10 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     out.mkdir(parents=True, exist_ok=True)
     done = _open_cache(out, _cache_key(submission, release, spec, configs, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
-    flows = None
-    if flow_cache and backends.flow is not None:
-        folder = cache_dir(release, backends.flow.name, f"{backends.flow.version} {spec.flow_checkpoint or ''}")
-        flows = str(folder) if folder else None
+    flows = _flow_cache(release, spec, backends) if reference_cache else None
+    results = {c: _result_cache(release, c, spec) if reference_cache else None for c in configs}
     sizes = {c: reference_size(release / c) for c in configs}
-    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, sizes[c])
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, results[c], sizes[c])
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
     bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress,
@@ -286,6 +309,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
                  "code_version": str(rel_meta.get("code_version", "")),
                  "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
         backends=backends.describe(), reference_flow_cache=flows,
+        reference_result_cache={c: results[c] for c in configs if results[c]},
         allow_missing=allow_missing, encoding_check=ENCODING_OFF if accept_lossy else ENCODING_ON,
         problems=problems, copy_check=copy_check(records),
         timing={"seconds": time.perf_counter() - start, "workers": workers, "executor": executor,

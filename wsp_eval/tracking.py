@@ -281,9 +281,26 @@ def _lab(rgb: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
 
 
+def _squared_delta_e(planes: list[np.ndarray], colour: np.ndarray) -> np.ndarray:
+    """Squared CIE76 distance of a Lab image, given as its three planes, to `colour` (one Lab colour, or an image
+    of them), summed L, a, b in that order: the float32 arithmetic of `np.linalg.norm(lab - colour, axis=-1)`
+    before its square root, so thresholds decide exactly as the norm did, at a fraction of its cost."""
+    colour = np.asarray(colour, np.float32)
+    d = planes[0] - colour[..., 0]
+    s = d * d
+    for k in (1, 2):
+        np.subtract(planes[k], colour[..., k], out=d)
+        s += d * d
+    return s
+
+
+def _planes(lab: np.ndarray) -> list[np.ndarray]:
+    return list(cv2.split(lab))
+
+
 def _near(lab: np.ndarray, colour: np.ndarray, delta_e: float) -> np.ndarray:
     """Which pixels of a Lab image lie within CIE76 `delta_e` of `colour` (one Lab colour, or an image of them)."""
-    return np.linalg.norm(lab - colour, axis=-1) < delta_e
+    return np.sqrt(_squared_delta_e(_planes(lab), colour)) < delta_e
 
 
 def _colour_mask(rgb: np.ndarray, lab: np.ndarray) -> np.ndarray:
@@ -335,12 +352,13 @@ def occlusion_fit(rgb: np.ndarray, visible: np.ndarray, model: ColourModel, esti
     x1, y1 = min(left + 2 * r + w + 1, SCORING_SIZE), min(top + 2 * r + h + 1, SCORING_SIZE)
     if x1 - x0 < w or y1 - y0 < h:
         return np.asarray(estimate, np.float64)
-    lab = _lab(rgb[y0:y1, x0:x1])
-    coloured = _near(lab, model.lab, COLOUR_DELTA_E)
-    unchanged = _near(lab, model.lab0[y0:y1, x0:x1], BACKGROUND_DELTA_E)
-    like_surround = np.zeros_like(unchanged)
+    planes = _planes(_lab(rgb[y0:y1, x0:x1]))
+    coloured = np.sqrt(_squared_delta_e(planes, model.lab)) < COLOUR_DELTA_E
+    unchanged = np.sqrt(_squared_delta_e(planes, model.lab0[y0:y1, x0:x1])) < BACKGROUND_DELTA_E
+    nearest = np.full(planes[0].shape, np.inf, np.float32)  # to the nearest surrounding colour (sqrt is monotone)
     for colour in model.surround:
-        like_surround |= _near(lab, colour, BACKGROUND_DELTA_E)
+        np.minimum(nearest, _squared_delta_e(planes, colour), out=nearest)
+    like_surround = np.sqrt(nearest) < BACKGROUND_DELTA_E
     background = (~coloured & (unchanged | like_surround)).astype(np.float32)
     shape = model.shape.astype(np.float32)
     score = (2 * cv2.matchTemplate(visible[y0:y1, x0:x1].astype(np.float32), shape, cv2.TM_CCORR)

@@ -141,6 +141,7 @@ class OpenAIJudge:
     """A primitive judge asking a VLM behind an OpenAI-compatible chat-completions endpoint."""
 
     name = "openai"
+    cacheable = False  # a remote model may answer differently behind the same name: verdicts are never reused
 
     def __init__(self, base_url: str, model: str, api_key: str | None = None, timeout: float = 120.0,
                  max_retries: int = 2):

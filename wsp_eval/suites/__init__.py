@@ -7,6 +7,8 @@ Every suite module provides:
     NEEDS            the backend roles it uses ("flow", "tracker", "judge")
     GROUP_BY         what its report breakdown is cut by
     BALANCED         True when the suite score averages within groups first, then across them (T5)
+    REFERENCE_RESULTS  True when `prepare` keeps a result on the reference (`InstanceReference.cached`) in
+                     the reference-result cache (`wsp_eval.reference_cache`)
     prepare(ref, backends)                  reference-side work, once per instance (`InstanceReference`)
     score_seed(prepared, videos, backends)  (score 0–100, detail) for one seed; videos: role → (frames, fps)
     groups(rows)                            the breakdown group of every instance row

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -9,7 +10,8 @@ import numpy as np
 
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
-from wsp_eval.reference import reference_frames, reference_masks
+from wsp_eval.reference import iter_reference_frames, reference_frames, reference_masks
+from wsp_eval.reference_cache import load_or_compute_result
 from wsp_eval.release_format import split_config
 
 
@@ -20,6 +22,7 @@ class InstanceReference:
     config_dir: Path
     row: dict
     flow_cache: Path | None = None  # this release's and flow backend's reference-flow cache (`flow_cache`)
+    result_cache: Path | None = None  # this release's and suite's reference-result cache (`reference_cache`)
     _cache: dict = field(default_factory=dict, repr=False)
 
     def episode(self, role: str) -> int:
@@ -36,6 +39,44 @@ class InstanceReference:
         if key not in self._cache:
             self._cache[key] = reference_masks(self.config_dir, self.episode(role))
         return self._cache[key]
+
+    def first_mask(self, role: str) -> np.ndarray:
+        """The robot label mask of frame 0 (H, W), without decoding the others."""
+        key = ("masks", role)
+        if key in self._cache:
+            return self._cache[key][0]
+        return reference_masks(self.config_dir, self.episode(role), first_only=True)[0]
+
+    def equals(self, role: str, frames: np.ndarray, mad: float) -> bool:
+        """Whether `frames` (N, H, W, 3) are this role's reference video: the same shape and a mean absolute
+        difference below `mad`. The reference is decoded only until the differences summed so far already reach
+        `mad` over the whole video (so a video unlike its reference costs a few decoded frames); a reference
+        decoded to its end is kept for the next seed."""
+        key = ("frames", role)
+        if key in self._cache:
+            reference = self._cache[key]
+            return bool(frames.shape == reference.shape
+                        and np.abs(frames.astype(np.int16) - reference).mean() < mad)
+        if len(frames) != self.num_frames(role):
+            return False
+        budget, total, decoded = mad * frames.size, 0, []
+        for k, f in enumerate(iter_reference_frames(self.config_dir, self.episode(role))):
+            if f.shape != frames.shape[1:]:
+                return False
+            total += int(np.abs(frames[k].astype(np.int16) - f).sum())
+            if total >= budget:
+                return False
+            decoded.append(f)
+        self._cache[key] = np.stack(decoded)
+        return True
+
+    def cached(self, compute: Callable[[], dict]) -> dict:
+        """The suite's JSON-ready result on this instance's reference, from the reference-result cache when there
+        is one (`wsp_eval.reference_cache`), else `compute()`."""
+        if self.result_cache is None:
+            return compute()
+        return load_or_compute_result(self.result_cache, self.config_dir.name, self.episode(self.row["roles"][0]),
+                                      compute)
 
     def num_frames(self, role: str) -> int:
         return int(self.row["num_frames"][self.row["roles"].index(role)])

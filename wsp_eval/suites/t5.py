@@ -11,6 +11,7 @@ SUITE, TITLE = "t5", "Interaction dynamics"
 ROLES = ("reference",)
 NEEDS = ("judge",)
 GROUP_BY, BALANCED = "primitive", True
+REFERENCE_RESULTS = True  # `prepare` keeps its result on the reference in the reference-result cache
 
 
 def _judge(frames, row: dict, platform: str, judge) -> tuple[float, dict]:
@@ -20,8 +21,11 @@ def _judge(frames, row: dict, platform: str, judge) -> tuple[float, dict]:
 
 
 def prepare(ref, backends) -> dict:
-    score, detail = _judge(ref.frames("reference"), ref.row, ref.platform, backends.judge)
-    return {"row": ref.row, "platform": ref.platform, "reference": {"score": score, **detail}}
+    def verdict() -> dict:
+        score, detail = _judge(ref.frames("reference"), ref.row, ref.platform, backends.judge)
+        return {"score": score, **detail}
+
+    return {"row": ref.row, "platform": ref.platform, "reference": ref.cached(verdict)}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
