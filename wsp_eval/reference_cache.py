@@ -68,8 +68,9 @@ def write_atomic(path: Path, write: Callable[[object], None], suffix: str) -> No
 
 def results_folder(release: Path, suite: str, backends: dict, spec: dict) -> Path | None:
     """The result cache of one suite: keyed by the suite, the name and version of each backend it uses
-    (`Backends.describe()`), the backend choice with its checkpoints (path, size, modification time) and the
-    source of every `wsp_eval` module (any change to scoring code starts a new folder)."""
+    (`Backends.describe()`), their `BackendSpec` fields (choice, checkpoint paths, each checkpoint's size and
+    modification time) and the source of every `wsp_eval` module (any change to scoring code starts a new
+    folder)."""
     checkpoints = []
     for value in spec.values():
         if isinstance(value, str) and os.path.isfile(value):

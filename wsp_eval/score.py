@@ -178,17 +178,20 @@ def _flow_cache(release: Path, spec: BackendSpec, backends: Backends) -> str | N
     return str(folder) if folder else None
 
 
-def _result_cache(release: Path, config: str, spec: BackendSpec) -> str | None:
-    """The reference-result cache folder of a config's suite, or None: for a suite without reference-side results,
-    or when a backend it uses may answer differently over time (`cacheable` False: a remote VLM)."""
+def _result_cache(release: Path, config: str, spec: BackendSpec, backends: Backends) -> str | None:
+    """The reference-result cache folder of a config's suite (`backends`: built for at least its roles), or None:
+    for a suite without reference-side results, or when a backend it uses may answer differently over time
+    (`cacheable` False: a remote VLM)."""
     suite = split_config(config)[0]
     module = SCORERS[suite]
     if not module.REFERENCE_RESULTS:
         return None
-    backends = _backends(spec, module.NEEDS)
-    if not all(getattr(getattr(backends, role), "cacheable", True) for role in module.NEEDS):
+    used = [getattr(backends, role) for role in module.NEEDS]
+    if not all(getattr(b, "cacheable", True) for b in used):
         return None
-    folder = results_folder(release, suite, backends.describe(), spec.to_json())
+    described = {role: d for role, d in backends.describe().items() if role in module.NEEDS}
+    chosen = {k: v for k, v in spec.to_json().items() if k.split("_")[0] in module.NEEDS}  # role, checkpoint, …
+    folder = results_folder(release, suite, described, chosen)
     return str(folder) if folder else None
 
 
@@ -267,7 +270,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     done = _open_cache(out, _cache_key(submission, release, spec, configs, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
     flows = _flow_cache(release, spec, backends) if reference_cache else None
-    results = {c: _result_cache(release, c, spec) if reference_cache else None for c in configs}
+    results = {c: _result_cache(release, c, spec, backends) if reference_cache else None for c in configs}
     sizes = {c: reference_size(release / c) for c in configs}
     todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, results[c], sizes[c])
             for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]

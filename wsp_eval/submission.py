@@ -158,7 +158,7 @@ def check_frames(frames: np.ndarray, fps: float, exp: Expected, rel: str) -> lis
         problems.append(Problem(rel, f"fps missing or absurd ({fps}); expected {exp.fps:g}"))
     if len(frames) != exp.num_frames:
         problems.append(Problem(rel, f"{len(frames)} frames; the reference horizon is {exp.num_frames}"))
-    if len(frames) > 1 and (frames == frames[0]).all() and frames[0].min() == frames[0].max():
+    if len(frames) > 1 and frames[0].min() == frames[0].max() and (frames == frames[0]).all():  # cheap test first
         problems.append(Problem(rel, "constant video (every pixel of every frame has the same value)"))
     return problems
 

@@ -213,8 +213,21 @@ def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int) -> l
         if frames and frames[0].shape[:2] != (frame.height, frame.width):
             raise VideoError(f"{path}: the resolution changes mid-video ({frames[0].shape[1]}×{frames[0].shape[0]} "
                              f"then {frame.width}×{frame.height}); export every frame at one resolution")
-        frames.append(frame.to_ndarray(format="rgb24"))
+        frames.append(_rgb(frame))
     return frames
+
+
+def _rgb(frame) -> np.ndarray:
+    """A decoded frame as RGB uint8 (H, W, 3). Planar RGB (libx264rgb's `gbrp`, what `write_video` writes) is
+    interleaved by OpenCV straight from the planes: the same bytes as libswscale's conversion, and decoding takes
+    ≈ 15 % less time (docs/measurements.md)."""
+    if frame.format.name == "gbrp":
+        import cv2
+
+        g, b, r = (np.frombuffer(p, np.uint8).reshape(frame.height, p.line_size)[:, :frame.width]
+                   for p in frame.planes)
+        return cv2.merge([r, g, b])
+    return frame.to_ndarray(format="rgb24")
 
 
 def write_video(path, frames: np.ndarray, fps: float) -> None:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
-from wsp_eval.reference import iter_reference_frames, reference_frames, reference_masks
+from wsp_eval.reference import iter_reference_frames, reference_masks
 from wsp_eval.reference_cache import load_or_compute_result
 from wsp_eval.release_format import split_config
 
@@ -29,10 +29,31 @@ class InstanceReference:
         return self.row["episode_indices"][self.row["roles"].index(role)]
 
     def frames(self, role: str) -> np.ndarray:
+        for _ in self._in_order(role):  # decodes what is left; the whole video is then kept
+            pass
+        return self._cache[("frames", role)]
+
+    def _in_order(self, role: str) -> Iterator[np.ndarray]:
+        """The role's reference frames in order: those decoded for an earlier caller first, then decoding on from
+        where it stopped (one decoder per role while the instance is scored); decoded to its end, the video is
+        kept as `frames(role)`."""
         key = ("frames", role)
-        if key not in self._cache:
-            self._cache[key] = reference_frames(self.config_dir, self.episode(role))
-        return self._cache[key]
+        if key in self._cache:
+            yield from self._cache[key]
+            return
+        prefix, decoder = self._cache.setdefault(
+            ("prefix", role), ([], iter_reference_frames(self.config_dir, self.episode(role))))
+        k = 0
+        while True:
+            if k == len(prefix):
+                frame = next(decoder, None)
+                if frame is None:
+                    self._cache[key] = np.stack(prefix)
+                    del self._cache[("prefix", role)]
+                    return
+                prefix.append(frame)
+            yield prefix[k]
+            k += 1
 
     def masks(self, role: str) -> np.ndarray:
         key = ("masks", role)
@@ -49,26 +70,20 @@ class InstanceReference:
 
     def equals(self, role: str, frames: np.ndarray, mad: float) -> bool:
         """Whether `frames` (N, H, W, 3) are this role's reference video: the same shape and a mean absolute
-        difference below `mad`. The reference is decoded only until the differences summed so far already reach
-        `mad` over the whole video (so a video unlike its reference costs a few decoded frames); a reference
-        decoded to its end is kept for the next seed."""
-        key = ("frames", role)
-        if key in self._cache:
-            reference = self._cache[key]
-            return bool(frames.shape == reference.shape
-                        and np.abs(frames.astype(np.int16) - reference).mean() < mad)
+        difference below `mad`. The reference is decoded only until the differences summed so far reach `mad`
+        over the whole video (a video unlike its reference costs a few decoded frames, which the next seed
+        reuses)."""
         if len(frames) != self.num_frames(role):
             return False
-        budget, total, decoded = mad * frames.size, 0, []
-        for k, f in enumerate(iter_reference_frames(self.config_dir, self.episode(role))):
-            if f.shape != frames.shape[1:]:
+        budget, total, n = mad * frames.size, 0, 0
+        for k, f in enumerate(self._in_order(role)):
+            if k == len(frames) or f.shape != frames.shape[1:]:
                 return False
             total += int(np.abs(frames[k].astype(np.int16) - f).sum())
             if total >= budget:
                 return False
-            decoded.append(f)
-        self._cache[key] = np.stack(decoded)
-        return True
+            n += 1
+        return n == len(frames)
 
     def cached(self, compute: Callable[[], dict]) -> dict:
         """The suite's JSON-ready result on this instance's reference, from the reference-result cache when there
