@@ -11,7 +11,10 @@
   Evaluated object: the target.
 Every proposal is validated unrendered first (common validity + the kind's rule over the whole rollout);
 only then is it rendered, checked again, and tracked with `wsp_eval.tracking`: the reference gate must reach
-`GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100.
+`GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100. A false-contact instance
+must also be one T4 can fail: its source rollout (the expert carrying the target away along the same arm path,
+from the same first frame), scored as a submission, must score 0 wherever the simulator moved the target more
+than `MOTION_MAX` px.
 Thresholds and task choices are documented in docs/t4.md. Which tasks serve which kind, and how a scene is
 edited (what a distractor is, where objects may go), is the platform's: `PlatformKit.t4_kind_tasks` and
 `t4_rig` (on LIBERO a BDDL scene cannot gain a body, so the distractor is one of the scene's own movable
@@ -228,5 +231,25 @@ class T4Builder(SuiteBuilder):
         if hands is not None:
             row["hand_pixels_256"] = hands.tolist()
         src = rig.replay(rig.render, seed, original)  # the unperturbed source rollout
+        rendered += len(source)
+        if kind == "false_contact" and (carried := passes_when_carried(src, k, pixel, mask0, gate, motion, hands)):
+            return Dropped("tracker_misses_carrying", rendered, simulated, carried)
         return Kept(row, [RolloutArrays.from_rollout("reference", ref), RolloutArrays.from_rollout(SOURCE_ROLE, src)],
-                    rendered + len(source), simulated)
+                    rendered, simulated)
+
+
+def passes_when_carried(src, k: int, pixel: np.ndarray, mask0: np.ndarray, gate: float, motion,
+                        hands: np.ndarray | None) -> dict | None:
+    """A false-contact reference's source rollout is the expert grasping the target and carrying it away, from the
+    same first frame along the same arm path: exactly what a model that hallucinates contact would generate.
+    Where the simulator moved the target more than MOTION_MAX px in the scoring frame, T4 must score that video 0;
+    when it scores 100 instead (the tracker lost a small dark object under the fingers and kept following a still
+    neighbour: LIBERO's chocolate pudding, docs/validity.md §2), the instance cannot tell the two apart. Returns
+    the evidence of such a miss, else None."""
+    size = frame_size(src.observations[0].rgb)
+    truth = np.stack([project(o.object_poses[k, :3], src.intrinsic, src.extrinsic, size) for o in src.observations])
+    moved = float(np.linalg.norm(truth - truth[0], axis=1).max())
+    if moved <= MOTION_MAX:
+        return None
+    score = t4_score(src.stack("rgb"), pixel, mask0, gate, motion.visible_fraction, hands=hands)
+    return None if score.score == 0 else {"true_d": moved, "d": score.displacement}
