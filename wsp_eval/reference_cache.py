@@ -20,6 +20,7 @@ import json
 import os
 import tempfile
 from collections.abc import Callable, Iterable
+from functools import lru_cache
 from pathlib import Path
 
 from wsp_eval.release_format import RELEASE_JSON
@@ -77,10 +78,17 @@ def results_folder(release: Path, suite: str, backends: dict, spec: dict) -> Pat
             st = os.stat(value)
             checkpoints.append(f"{value}:{st.st_size}:{st.st_mtime_ns}")
     parts = [f"{RESULTS_FORMAT}", suite, json.dumps(backends, sort_keys=True), json.dumps(spec, sort_keys=True),
-             *checkpoints]
-    package = Path(__file__).parent
-    sources = [p.read_bytes() for p in sorted(package.rglob("*.py"))]
-    return cache_folder(release, RESULTS, [p.encode() for p in parts] + sources)
+             *checkpoints, _scoring_source()]
+    return cache_folder(release, RESULTS, [p.encode() for p in parts])
+
+
+@lru_cache(maxsize=1)
+def _scoring_source() -> str:
+    """SHA-256 of every `wsp_eval` module's source, read once per process."""
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.rglob("*.py")):
+        h.update(path.read_bytes() + b"\0")
+    return h.hexdigest()
 
 
 def load_or_compute_result(folder: Path, config: str, episode: int, compute: Callable[[], dict]) -> dict:

@@ -41,8 +41,9 @@ class InstanceReference:
         if key in self._cache:
             yield from self._cache[key]
             return
-        prefix, decoder = self._cache.setdefault(
-            ("prefix", role), ([], iter_reference_frames(self.config_dir, self.episode(role))))
+        if ("prefix", role) not in self._cache:
+            self._cache[("prefix", role)] = ([], iter_reference_frames(self.config_dir, self.episode(role)))
+        prefix, decoder = self._cache[("prefix", role)]
         k = 0
         while True:
             if k == len(prefix):
