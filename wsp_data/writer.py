@@ -3,10 +3,17 @@ own API (near-lossless h264 yuv444p crf 0 video), `wsp.*` episode columns in its
 `robot_masks.parquet` (PNG label masks, outside LeRobot's features) and `instances.parquet` (one row per
 instance).
 
-Writes are deterministic (same staged input → byte-identical files) and atomic per config: the dataset is
-written beside its final place and swapped in when complete. LeRobot appends each episode's video to its
-file by re-muxing the whole file, quadratic in episodes per file; so it writes one video file per episode here,
-and `_pack_videos` joins them into files of LeRobot's default size, each muxed once (linear).
+Writes are deterministic (same staged input → byte-identical files, whatever the number of workers) and atomic
+per config: the dataset is written beside its final place and swapped in when complete. LeRobot appends each
+episode's video to its file by re-muxing the whole file, quadratic in episodes per file; so it writes one video
+file per episode here, and `_pack_videos` joins them into files of LeRobot's default size, each muxed once
+(linear).
+
+Parallel where it can be: `workers` processes encode episodes ahead of the writer (`encode_episode`: the video
+and its image statistics by LeRobot's own streaming encoder, `StreamingVideoEncoder`, on one x264 thread; the
+robot masks' PNGs). The writer process (LeRobot's frame table, episode metadata and running statistics) stays
+serial, as LeRobot writes its dataset files in episode order; it takes the finished videos through LeRobot's
+streaming-encoder interface (`_AheadVideos`).
 """
 
 from __future__ import annotations
@@ -16,7 +23,11 @@ import io
 import json
 import logging
 import shutil
+from collections import deque
 from collections.abc import Iterable
+from dataclasses import dataclass
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -57,9 +68,10 @@ def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
 def write_config(config_dir: Path, config: str, platform: str,
                  instances: Iterable[Instance], workers: int = 1) -> int:
     """Write `config_dir` from kept slots (in slot order); returns the number of episodes written. `workers`
-    threads write LeRobot's frame images and encode the robot masks ahead of the writer."""
+    processes encode the episodes (videos, statistics, mask PNGs) ahead of the writer."""
     from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from lerobot.datasets.video_utils import StreamingVideoEncoder
 
     info = kit(platform).info
     tmp = config_dir.with_name(config_dir.name + ".writing")
@@ -68,21 +80,27 @@ def write_config(config_dir: Path, config: str, platform: str,
     ds = LeRobotDataset.create(
         f"worldsimprobe/{config}", fps=info.fps, features=frame_features(info), root=tmp,
         robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
-        video_files_size_in_mb=ONE_EPISODE_PER_FILE, image_writer_threads=workers,
+        video_files_size_in_mb=ONE_EPISODE_PER_FILE, streaming_encoding=True,
     )
+    if not isinstance(getattr(ds.writer, "_streaming_encoder", None), StreamingVideoEncoder):
+        raise RuntimeError("this lerobot's dataset writer has no streaming encoder to hand encoded videos to; "
+                           "install the lerobot version pinned in pyproject.toml")
+    ahead = ds.writer._streaming_encoder = _AheadVideos(info.video_key)
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
-    with contextlib.closing(_MaskWriter(tmp / ROBOT_MASKS)) as masks:  # closed also when a step below raises
-        for record, rollouts, pngs in ordered_ahead(_with_mask_pngs, instances, workers):
+    with (contextlib.closing(_MaskWriter(tmp / ROBOT_MASKS)) as masks,  # closed also when a step below raises
+          _encoder(info.fps, tmp, workers) as encode):
+        for record, rollouts, encoded in ordered_ahead(encode, instances, workers):
             row = dict(record.row)
             indices = []
-            for r, r_pngs in zip(rollouts, pngs, strict=True):
+            for r, e in zip(rollouts, encoded, strict=True):
                 index = len(episode_rows)
+                ahead.ready.append((e.video, e.stats))
                 with contextlib.redirect_stderr(io.StringIO()):
                     for frame in _frames(r, row["instruction"], info):
                         ds.add_frame(frame)
                     ds.save_episode(parallel_encoding=False)
-                masks.add(index, r_pngs)
+                masks.add(index, e.mask_pngs)
                 indices.append(index)
                 episode_rows.append({
                     "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
@@ -119,17 +137,90 @@ def write_config(config_dir: Path, config: str, platform: str,
     return len(episode_rows)
 
 
-def _with_mask_pngs(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[list[bytes]]]:
-    """The instance with each rollout's label masks as PNG files (`robot_masks.parquet`'s cells)."""
+@dataclass(frozen=True)
+class Encoded:
+    """One episode encoded ahead of the writer: its mp4 (alone in a temporary folder), LeRobot's per-channel
+    statistics of its frames, and its label masks as PNG files (`robot_masks.parquet`'s cells)."""
+
+    video: Path
+    stats: dict
+    mask_pngs: list[bytes]
+
+
+def encode_episode(rgb: np.ndarray, mask: np.ndarray, fps: int, folder: Path) -> Encoded:
+    """Encode one episode (runs in a worker process): the video by LeRobot's streaming encoder with the reference
+    codec on one x264 thread (the same bytes in any process), into a new temporary folder under `folder`, and the
+    masks as PNGs."""
+    import av
+    from lerobot.configs.video import RGBEncoderConfig
+    from lerobot.datasets.video_utils import StreamingVideoEncoder
     from PIL import Image
+
+    encoder = StreamingVideoEncoder(fps, RGBEncoderConfig(**REFERENCE_VIDEO_CODEC), queue_maxsize=len(rgb) + 1,
+                                    encoder_threads=1)  # the queue holds every frame: none is ever dropped
+    encoder.start_episode(["video"], folder)
+    for frame in rgb:
+        encoder.feed_frame("video", frame)
+    path, stats = encoder.finish_episode()["video"]
+    with av.open(str(path)) as container:
+        frames = container.streams.video[0].frames
+    if stats is None or frames != len(rgb):
+        raise RuntimeError(f"{path}: the encoder wrote {frames} of {len(rgb)} frames")
 
     def png(m: np.ndarray) -> bytes:
         buf = io.BytesIO()
         Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
         return buf.getvalue()
 
-    record, rollouts = instance
-    return record, rollouts, [[png(m) for m in r.mask] for r in rollouts]
+    return Encoded(path, stats, [png(m) for m in mask])
+
+
+class _AheadVideos:
+    """Stands in for LeRobot's `StreamingVideoEncoder` inside its dataset writer: the episode's video was encoded
+    ahead (`encode_episode`), so the frames fed here are ignored and `finish_episode` hands over the finished file."""
+
+    def __init__(self, key: str):
+        self.key, self.ready = key, deque()
+
+    def start_episode(self, video_keys: list[str], temp_dir: Path, depth_video_keys: list[str] | None = None) -> None:
+        if list(video_keys) != [self.key]:
+            raise RuntimeError(f"expected the one video feature {self.key}, got {video_keys}")
+
+    def feed_frame(self, video_key: str, image: np.ndarray) -> None:
+        pass
+
+    def finish_episode(self) -> dict[str, tuple[Path, dict]]:
+        return {self.key: self.ready.popleft()}
+
+    def cancel_episode(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+@contextlib.contextmanager
+def _encoder(fps: int, folder: Path, workers: int):
+    """`encode(instance) -> (record, rollouts, [Encoded per rollout])`: in this process for one worker, else in a
+    pool of `workers` processes (spawned: the writer's threads make forking unsafe)."""
+    if workers <= 1:
+        def episode(r: RolloutArrays) -> Encoded:
+            return encode_episode(r.rgb, r.mask, fps, folder)
+    else:
+        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+
+        def episode(r: RolloutArrays) -> Encoded:
+            return pool.submit(encode_episode, r.rgb, r.mask, fps, folder).result()
+
+    def encode(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[Encoded]]:
+        record, rollouts = instance
+        return record, rollouts, [episode(r) for r in rollouts]
+
+    try:
+        yield encode
+    finally:
+        if workers > 1:
+            pool.shutdown(cancel_futures=True)
 
 
 class _MaskWriter:
