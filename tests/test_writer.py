@@ -66,3 +66,10 @@ def test_packed_videos_hold_every_frame_where_lerobot_looks(tmp_path, monkeypatc
         assert int(item["episode_index"]) == episode and int(item["frame_index"]) == frame
         decoded = (item[kit(PLATFORM).info.video_key].numpy().transpose(1, 2, 0) * 255).round()
         assert np.abs(decoded - rollouts[episode].rgb[frame]).max() <= 3  # yuv444p crf 0: near lossless
+    # the image statistics come from the encoding workers (LeRobot's streaming statistics of every frame, on a
+    # downsampled copy): per channel, in [0, 1], and the frames' own mean to within the downsampling's 1 %
+    stats = ds.meta.stats[kit(PLATFORM).info.video_key]
+    frames = np.concatenate([r.rgb for r in rollouts]).reshape(-1, 3) / 255
+    assert np.asarray(stats["mean"]).shape == (3, 1, 1)
+    np.testing.assert_allclose(np.asarray(stats["mean"]).reshape(3), frames.mean(0), atol=0.01)
+    assert (np.asarray(stats["min"]) >= 0).all() and (np.asarray(stats["max"]) <= 1).all()
