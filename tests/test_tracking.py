@@ -395,3 +395,29 @@ def test_bad_inputs_are_refused():
         tr.scoring_frames(np.zeros((8, 8), np.uint8))
     with pytest.raises(ValueError, match="gate_reference"):
         tr.t4_score(scene(3), np.array(OBJ_AT, float), hand_mask(), 0.0)
+
+
+def _pudding(n: int, lift: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """LIBERO's chocolate pudding in miniature: a 10 px textured object with still textured neighbours 1 px to
+    its right and below, lifted `lift` px per frame from frame 3 on."""
+    obj, near = texture(10, 3), texture(30, 13)
+    c = (150, 170)
+    right, below = (c[0] + 5 + 1 + 15, c[1]), (c[0], c[1] + 5 + 1 + 15)
+    return video(n, [(near, lambda t: right), (texture(30, 23), lambda t: below),
+                     (obj, lambda t: (c[0], c[1] - round(max(0, t - 3) * lift)))]), c
+
+
+def test_lk_stage_seeds_on_a_small_object_not_on_its_neighbours():
+    """The SPEC's grid (radius 10 px) around a 10 px object lies mostly on its neighbours: lifted 52 px, the
+    object's own points are lost while the neighbours' stay visible and still, so its centroid reads < 10 px —
+    a carried-away object that T4 would pass. The LK stage's grid (`LK_QUERY_RADIUS`, 5 px) lies on the object:
+    its points are lost with it, visible in < 0.5 of the frames (the reference's object: all), a tracking
+    failure, so T4 scores 0. Left still, the same grid keeps it visible and still (no false alarm)."""
+    lifted, c = _pudding(30, 2.0)
+    spec = tr.track(lifted, tr.query_grid(np.array(c, float)), anchored=True)
+    path = tr.centroid_path(spec, anchored=True)
+    assert np.linalg.norm(path - path[0], axis=1).max() < tr.MOTION_MAX and spec.visible.any(axis=1).mean() == 1
+    moved = tr.object_motion(lifted, np.array(c, float))
+    assert moved.visible_fraction < tr.TRACKED_RATIO or moved.displacement > tr.MOTION_MAX
+    still = tr.object_motion(_pudding(30, 0.0)[0], np.array(c, float))
+    assert still.visible_fraction == 1 and still.displacement < 1
