@@ -23,7 +23,7 @@ class LKTracker:
 
     def __init__(self):
         self.version = (f"opencv {cv2.__version__} colour region (ΔE {tracking.COLOUR_DELTA_E:g}, occlusion fit) "
-                        "+ pyramidal LK with forward-backward check")
+                        f"+ pyramidal LK with forward-backward check (object grid r = {tracking.LK_QUERY_RADIUS:g} px)")
 
     @staticmethod
     def prepare(frames: np.ndarray) -> tracking.ScoringVideo:
