@@ -19,8 +19,6 @@ OSC_POS_SCALE = 0.05  # m per unit of LIBERO's OSC position action
 OSC_COMMANDED = 0.01  # m per step: an OSC command at least this large …
 OSC_STALLED = 0.05  # … achieving less than this fraction of it is a stalled hand (free motion: 0.09–0.36, 5th pct 0.16;
 #                     pressed into the table: 0.00–0.03; measured on a libero_object expert rollout)
-UNSEEN_WHEN_CARRIED = ("chocolate_pudding",)  # false contact: the T4 tracker misses this target carried away (the
-#   builder's `tracker_misses_carrying` dropped 8 of 8 proposals; docs/validity.md §2), so it never yields one
 TAP_MIN_XY = 0.015  # m: T5's tap on LIBERO strikes the task's own low target (`t5_rules`), push's threshold
 T5_EXCLUDED = {  # tasks T5 never draws, with the measured reason
     "libero_spatial/pick_up_the_black_bowl_next_to_the_cookie_box_and_place_it_on_the_plate":
@@ -96,14 +94,12 @@ class LiberoKit(PlatformKit):
     def t4_kind_tasks(self, tasks: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
         # every LIBERO task grasps its target and has scene objects to spare; but open fingers brush a tall
         # target that nearly fills them (measured: the alphabet soup can, 8 of 8 false-contact proposals
-        # touched it), so false contact takes the tasks with a low target, as T5's push and tap do, except
-        # those whose target the T4 tracker cannot see carried away (`UNSEEN_WHEN_CARRIED`)
+        # touched it), so false contact takes the tasks with a low target, as T5's push and tap do
         from wsp_data.platforms.libero.experts import task_spec
         from wsp_data.platforms.libero.primitives import low_target
 
         tasks = tuple(dict.fromkeys(tasks))
-        low = tuple(t for t in tasks if low_target(task_spec(t))
-                    and not any(k in task_spec(t).target for k in UNSEEN_WHEN_CARRIED))
+        low = tuple(t for t in tasks if low_target(task_spec(t)))
         return {"distractor": tasks, "false_contact": low, "spatial_proximity": tasks}
 
     def t4_needs(self, missing: Sequence[str]) -> str:
