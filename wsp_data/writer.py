@@ -25,8 +25,8 @@ import logging
 import shutil
 from collections import deque
 from collections.abc import Iterable
-from dataclasses import dataclass
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -203,14 +203,11 @@ class _AheadVideos:
 def _encoder(fps: int, folder: Path, workers: int):
     """`encode(instance) -> (record, rollouts, [Encoded per rollout])`: in this process for one worker, else in a
     pool of `workers` processes (spawned: the writer's threads make forking unsafe)."""
-    if workers <= 1:
-        def episode(r: RolloutArrays) -> Encoded:
-            return encode_episode(r.rgb, r.mask, fps, folder)
-    else:
-        pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn"))
+    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn")) if workers > 1 else None
 
-        def episode(r: RolloutArrays) -> Encoded:
-            return pool.submit(encode_episode, r.rgb, r.mask, fps, folder).result()
+    def episode(r: RolloutArrays) -> Encoded:
+        args = (r.rgb, r.mask, fps, folder)
+        return pool.submit(encode_episode, *args).result() if pool else encode_episode(*args)
 
     def encode(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[Encoded]]:
         record, rollouts = instance
@@ -219,7 +216,7 @@ def _encoder(fps: int, folder: Path, workers: int):
     try:
         yield encode
     finally:
-        if workers > 1:
+        if pool:
             pool.shutdown(cancel_futures=True)
 
 
