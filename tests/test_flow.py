@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from wsp_eval.flow import (
-    C, FLOW_SIZE, TAU, active_pixels_per_window, clip_duration, reference_flows, rmfa_score, rmfa_window_score,
+    C, FLOW_SIZE, TAU, active_flows, active_pixels_per_window, clip_duration, reference_flows, rmfa_score, rmfa_window_score,
     sample_times, video_flows, windows,
 )
 
@@ -97,6 +97,25 @@ def test_active_pixels_need_robot_motion():
     assert active_pixels_per_window(*ref0).tolist() == [0, 0]
     unlabelled = reference_flows(video, np.zeros_like(labels), fps=20)  # motion, but not on the robot
     assert active_pixels_per_window(*unlabelled).tolist() == [0, 0]
+
+
+def test_a_generated_flow_is_computed_only_where_the_reference_robot_moves():
+    """RMFA reads a generated flow only on its reference flow's active set, so `video_flows` skips the flows whose
+    active set is empty: the others are what a full computation gives, and the score is bit-identical."""
+    moving, labels = _moving_square(61, 1, 0)
+    still_half = np.concatenate([moving[:31], np.repeat(moving[30:31], 30, axis=0)])  # the robot stops at 1.5 s
+    halted = np.concatenate([labels[:31], np.repeat(labels[30:31], 30, axis=0)])
+    ref = reference_flows(still_half, halted, fps=20)
+    needed = active_flows(ref.flows, ref.masks)
+    assert needed[:7].all() and not needed[8:].any()  # flows 0–6 end by 1.4 s; from 1.6 s on the robot is still
+    generated = _moving_square(61, 1, 1)[0]
+    full = video_flows(generated, 20)
+    skipped = video_flows(generated, 20, needed=needed)
+    np.testing.assert_array_equal(skipped[needed], full[needed])
+    assert not skipped[~needed].any() and full[~needed].any()
+    assert rmfa_score(skipped, ref.flows, ref.masks) == rmfa_score(full, ref.flows, ref.masks)
+    with pytest.raises(ValueError, match="needed flags"):
+        video_flows(generated, 20, needed=needed[:-1])
 
 
 def test_duration_limits_the_samples():

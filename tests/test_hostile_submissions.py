@@ -128,6 +128,20 @@ def test_far_too_many_frames_stop_decoding(sub, t1_release, rows):
                  f"{horizon(rows, 6)}: export exactly {horizon(rows, 6)} frames (frame j at j/fps)"]}
 
 
+def test_a_header_without_a_frame_count_decodes_every_frame(tmp_path):
+    """Frames are decoded into one array sized by the header's count; a raw stream's header says 0, so the array
+    grows from one frame (doubling, within the horizon): the same frames as the same stream in an mp4."""
+    frames = np.random.default_rng(1).integers(0, 256, (37, 24, 40, 3), dtype=np.uint8)
+    encode(tmp_path / "a.mp4", frames)
+    encode(tmp_path / "a.h264", frames, fmt="h264")
+    counted, _ = read_video(tmp_path / "a.mp4")
+    for grown in (read_video(tmp_path / "a.h264")[0], read_video(tmp_path / "a.h264", max_frames=37)[0]):
+        assert grown.shape == counted.shape == (37, 24, 40, 3)
+        np.testing.assert_array_equal(grown, counted)
+    with pytest.raises(VideoError, match="more than 36 frames"):
+        read_video(tmp_path / "a.h264", max_frames=36)
+
+
 def test_a_file_larger_than_any_allowed_video_is_refused_unopened(sub, t1_release, rows):
     n = horizon(rows, 9)
     with open(sub / rel(9), "wb") as f:

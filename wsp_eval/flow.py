@@ -85,11 +85,17 @@ def _robot_grid(labels: np.ndarray) -> np.ndarray:
     return np.stack([cv2.resize(m, FLOW_SIZE, interpolation=cv2.INTER_NEAREST) for m in robot]).astype(bool)
 
 
-def video_flows(video: np.ndarray, fps: float, duration: float | None = None, backend=None) -> np.ndarray:
+def video_flows(video: np.ndarray, fps: float, duration: float | None = None, backend=None,
+                needed: np.ndarray | None = None) -> np.ndarray:
     """(K, 120, 160, 2) flows of a (T, H, W, 3) uint8 RGB video sampled at 5 Hz over `duration` seconds
-    (default: the whole clip), by `backend` (default DIS). Used for both the reference and a generated video."""
+    (default: the whole clip), by `backend` (default DIS). Used for both the reference and a generated video.
+    `needed` (K,) bool: compute only those flows, the others are zero (a generated video's flows where the
+    reference's active set is empty, `active_flows`, which RMFA never reads)."""
     idx = _sample_indices(len(video), fps, duration)
-    return (backend or DISFlow()).flows(_rgb_grid(np.asarray(video)[idx]))
+    samples = _rgb_grid(np.asarray(video)[idx])
+    if needed is not None and len(needed) != max(len(samples) - 1, 0):
+        raise ValueError(f"{len(needed)} needed flags for {max(len(samples) - 1, 0)} flows")
+    return (backend or DISFlow()).flows(samples, needed)
 
 
 def reference_flows(video: np.ndarray, labels: np.ndarray, fps: float, duration: float | None = None,
@@ -122,6 +128,12 @@ def _active(flows: np.ndarray, masks: np.ndarray, tau: float) -> np.ndarray:
         raise ValueError(f"flows {flows.shape} and masks {masks.shape} do not match")
     fx, fy = flows[..., 0], flows[..., 1]  # |flow|: np.linalg.norm(flows, axis=-1)'s arithmetic, 15× faster
     return masks & (np.sqrt(fx * fx + fy * fy) > tau)
+
+
+def active_flows(flows: np.ndarray, masks: np.ndarray, tau: float = TAU) -> np.ndarray:
+    """(K,) bool: which reference flows have a non-empty active set. Only these flows of a generated video enter
+    any window's E (a flow whose M is empty contributes no pixel), so only these need computing."""
+    return _active(flows, masks, tau).reshape(len(flows), -1).any(axis=1)
 
 
 def active_pixels_per_window(flows: np.ndarray, masks: np.ndarray, tau: float = TAU) -> np.ndarray:

@@ -124,24 +124,40 @@ def scoring_frames(frames: np.ndarray) -> np.ndarray:
     return out
 
 
-@dataclass
 class ScoringVideo:
-    """A video in the scoring frame: grey (T, 256, 256) uint8 for LK, and RGB (T, 256, 256, 3) uint8 for the
-    colour-region stage (None for a grey input)."""
+    """A video in the scoring frame: `grey` (T, 256, 256) uint8 for LK, and `rgb` (T, 256, 256, 3) uint8 for the
+    colour-region stage (None for a grey input), resized from the source frames only when first asked for: an
+    object the LK stage tracks never needs it (`first_rgb` resizes frame 0 alone, for the colour test)."""
 
-    grey: np.ndarray
-    rgb: np.ndarray | None
+    def __init__(self, grey: np.ndarray, frames: np.ndarray | None = None):
+        self.grey, self._frames = grey, frames
+        self._rgb: np.ndarray | None = None
+
+    @property
+    def rgb(self) -> np.ndarray | None:
+        if self._rgb is None and self._frames is not None:
+            out = np.empty((len(self._frames), SCORING_SIZE, SCORING_SIZE, 3), np.uint8)
+            for t, f in enumerate(self._frames):
+                _resize_rgb(f, out[t])
+            self._rgb = out
+        return self._rgb
+
+    @property
+    def first_rgb(self) -> np.ndarray | None:
+        if self._rgb is not None or self._frames is None:
+            return None if self._rgb is None else self._rgb[0]
+        return _resize_rgb(self._frames[0], np.empty((SCORING_SIZE, SCORING_SIZE, 3), np.uint8))
+
+
+def _resize_rgb(frame: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    interp = cv2.INTER_AREA if max(frame.shape[:2]) > SCORING_SIZE else cv2.INTER_LINEAR
+    return cv2.resize(frame, (SCORING_SIZE, SCORING_SIZE), dst=dst, interpolation=interp)
 
 
 def scoring_video(frames: np.ndarray) -> ScoringVideo:
     """(T, H, W, 3) RGB or (T, H, W) grey uint8 video → `ScoringVideo` (resized as `scoring_frames`)."""
-    grey = scoring_frames(frames)
     frames = np.asarray(frames)
-    if frames.ndim != 4:
-        return ScoringVideo(grey, None)
-    size = (SCORING_SIZE, SCORING_SIZE)
-    interp = cv2.INTER_AREA if max(frames.shape[1:3]) > SCORING_SIZE else cv2.INTER_LINEAR
-    return ScoringVideo(grey, np.stack([cv2.resize(f, size, interpolation=interp) for f in frames]))
+    return ScoringVideo(scoring_frames(frames), frames if frames.ndim == 4 else None)
 
 
 def scoring_mask(mask: np.ndarray) -> np.ndarray:
@@ -204,7 +220,8 @@ def _lk(a: np.ndarray, b: np.ndarray, pts: np.ndarray, guess: np.ndarray, levels
                                               maxLevel=levels, **_LK)
     back, st_b, _ = cv2.calcOpticalFlowPyrLK(b, a, fwd, pts.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
                                              maxLevel=levels, **_LK)
-    fb = np.linalg.norm(back - pts, axis=1)
+    dx, dy = (back - pts).T  # |back − pts|: np.linalg.norm(axis=1)'s float32 arithmetic, without its overhead
+    fb = np.sqrt(dx * dx + dy * dy)
     ok = (st_f.reshape(-1) == 1) & (st_b.reshape(-1) == 1) & (fb < FB_MAX) & (err.reshape(-1) < err_max)
     return fwd, ok & np.isfinite(fwd).all(axis=1)
 
@@ -417,8 +434,8 @@ def object_tracks(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot
     the colour is distinct (`colour_model`; needs an RGB video and the reference's frame-0 robot mask), else
     by anchored LK on the grey video, from a grid of radius `LK_QUERY_RADIUS`."""
     if isinstance(video, ScoringVideo):
-        if video.rgb is not None and robot_mask0 is not None:
-            model = colour_model(video.rgb[0], object_px, robot_mask0)
+        if video.first_rgb is not None and robot_mask0 is not None:
+            model = colour_model(video.first_rgb, object_px, robot_mask0)
             if model is not None:
                 return region_tracks(video.rgb, query_grid(object_px), model)
         video = video.grey

@@ -59,6 +59,7 @@ ManiSkill and LIBERO render 128×128, SPEC §1), T2/T3 compare flows at 160×120
 pixels score nothing; 512 admits the usual generation sizes (256², 512²) and bounds a decoded frame to
 768 KiB, so a video of a reference's horizon (a few hundred frames) stays a few hundred MB at most, where one
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
+FIRST_ALLOCATION = 256  # frames allocated at most up front when no horizon bounds the video (`_decode` grows it)
 
 
 def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
@@ -81,13 +82,13 @@ def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
             if lossless and (why := encoding_problem(stream)) is not None:
                 raise VideoError(f"{path}: {why}; {LOSSLESS_FIX}")
             rate = stream.average_rate or stream.guessed_rate
-            frames = _decode(path, container.decode(stream), max_frames, max_side)
+            frames = _decode(path, container.decode(stream), max_frames, max_side, stream.frames)
     except VideoError:
         raise
     except (av.error.FFmpegError, OSError, ValueError) as e:
         raise VideoError(f"{path}: unreadable video ({type(e).__name__}: {e}); {REEXPORT}") from e
     fps = float(rate) if rate else float("nan")
-    return (np.stack(frames) if frames else np.zeros((0, 0, 0, 3), np.uint8)), fps
+    return frames, fps
 
 
 def _too_many(path, found: str, max_frames: int) -> VideoError:
@@ -203,31 +204,42 @@ class _Bits:
         return (1 << zeros) - 1 + self.u(zeros)
 
 
-def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int) -> list[np.ndarray]:
-    """Frames one by one, each checked before it is converted; stop at the first frame past `max_frames`."""
-    frames: list[np.ndarray] = []
+def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int, expected: int) -> np.ndarray:
+    """Frames one by one into one (N, H, W, 3) array, each checked before it is converted; stop at the first frame
+    past `max_frames`. `expected` (the header's frame count, which can lie) only sizes the first allocation,
+    within `max_frames` (or `FIRST_ALLOCATION` frames without it); more frames grow it, fewer are cut off."""
+    out: np.ndarray | None = None
+    n = 0
     for frame in decoded:
-        if max_frames is not None and len(frames) == max_frames:
+        if max_frames is not None and n == max_frames:
             raise _too_many(path, f"more than {max_frames} frames (decoding stopped there)", max_frames)
         _check_side(path, frame.width, frame.height, max_side)
-        if frames and frames[0].shape[:2] != (frame.height, frame.width):
-            raise VideoError(f"{path}: the resolution changes mid-video ({frames[0].shape[1]}×{frames[0].shape[0]} "
+        if out is None:
+            first = min(expected, max_frames if max_frames is not None else FIRST_ALLOCATION)
+            out = np.empty((max(first, 1), frame.height, frame.width, 3), np.uint8)
+        elif out.shape[1:3] != (frame.height, frame.width):
+            raise VideoError(f"{path}: the resolution changes mid-video ({out.shape[2]}×{out.shape[1]} "
                              f"then {frame.width}×{frame.height}); export every frame at one resolution")
-        frames.append(_rgb(frame))
-    return frames
+        if n == len(out):  # more frames than the header said: double, within max_frames
+            grow = n if max_frames is None else min(n, max_frames - n)
+            out = np.concatenate([out, np.empty((grow, *out.shape[1:]), np.uint8)])
+        _rgb(frame, out[n])
+        n += 1
+    return np.zeros((0, 0, 0, 3), np.uint8) if out is None else out[:n]
 
 
-def _rgb(frame) -> np.ndarray:
-    """A decoded frame as RGB uint8 (H, W, 3). Planar RGB (libx264rgb's `gbrp`, what `write_video` writes) is
-    interleaved by OpenCV straight from the planes: the same bytes as libswscale's conversion, and decoding takes
-    ≈ 15 % less time (docs/measurements.md)."""
+def _rgb(frame, dst: np.ndarray) -> None:
+    """A decoded frame as RGB uint8 into `dst` (H, W, 3). Planar RGB (libx264rgb's `gbrp`, what `write_video`
+    writes) is interleaved by OpenCV straight from the planes: the same bytes as libswscale's conversion, and
+    decoding takes ≈ 15 % less time (docs/measurements.md)."""
     if frame.format.name == "gbrp":
         import cv2
 
         g, b, r = (np.frombuffer(p, np.uint8).reshape(frame.height, p.line_size)[:, :frame.width]
                    for p in frame.planes)
-        return cv2.merge([r, g, b])
-    return frame.to_ndarray(format="rgb24")
+        cv2.merge([r, g, b], dst=dst)
+    else:
+        dst[:] = frame.to_ndarray(format="rgb24")
 
 
 def write_video(path, frames: np.ndarray, fps: float) -> None:

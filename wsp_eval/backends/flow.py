@@ -1,6 +1,7 @@
 """Optical-flow backends for RMFA (SPEC §4): OpenCV DIS (default, CPU, no weights) and DPFlow through
 ptlflow with a local checkpoint (optional). A backend maps RGB samples on the 160×120 grid to the flows
-between consecutive samples, in pixels of that grid."""
+between consecutive samples, in pixels of that grid: `flows(samples, needed=None)`, where `needed` (one bool per
+pair) names the pairs RMFA will read (the others may be left zero)."""
 
 from __future__ import annotations
 
@@ -20,13 +21,19 @@ class DISFlow:
     def __init__(self):
         self.version = f"opencv {cv2.__version__} DIS preset MEDIUM"
 
-    def flows(self, samples: np.ndarray) -> np.ndarray:
-        """(K+1, H, W, 3) uint8 RGB → (K, H, W, 2) float32 flows from sample k to k + 1."""
+    def flows(self, samples: np.ndarray, needed: np.ndarray | None = None) -> np.ndarray:
+        """(K+1, H, W, 3) uint8 RGB → (K, H, W, 2) float32 flows from sample k to k + 1; with `needed` (K,) bool,
+        only those (the rest zero). Each pair is computed alone (DIS keeps no state between calls), so a flow
+        is the same whether or not its neighbours are."""
         cv2.setNumThreads(1)
         dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-        grey = [cv2.cvtColor(s, cv2.COLOR_RGB2GRAY) for s in samples]
         out = np.zeros((max(len(samples) - 1, 0), *samples.shape[1:3], 2), np.float32)
-        for k in range(len(out)):
+        pairs = range(len(out)) if needed is None else np.flatnonzero(needed)
+        grey: dict[int, np.ndarray] = {}
+        for k in pairs:
+            for j in (k, k + 1):
+                if j not in grey:
+                    grey[j] = cv2.cvtColor(samples[j], cv2.COLOR_RGB2GRAY)
             out[k] = dis.calc(grey[k], grey[k + 1], None)
         return out
 
@@ -54,15 +61,15 @@ class DPFlow:
         self._model = ptlflow.get_model("dpflow", ckpt_path=str(path)).eval().to(self._device)
         self.version = f"ptlflow {getattr(ptlflow, '__version__', '?')} dpflow {path.name}"
 
-    def flows(self, samples: np.ndarray) -> np.ndarray:
-        if len(samples) < 2:
-            return np.zeros((0, *samples.shape[1:3], 2), np.float32)
+    def flows(self, samples: np.ndarray, needed: np.ndarray | None = None) -> np.ndarray:
+        out = np.zeros((max(len(samples) - 1, 0), *samples.shape[1:3], 2), np.float32)
+        if not len(out):
+            return out
         adapter = self._adapter_cls(self._model, samples.shape[1:3])
-        out = []
         with self._torch.no_grad():
-            for k in range(len(samples) - 1):
+            for k in range(len(out)) if needed is None else np.flatnonzero(needed):
                 inputs = adapter.prepare_inputs([samples[k], samples[k + 1]])
                 inputs = {key: v.to(self._device) for key, v in inputs.items()}
                 preds = adapter.unscale(self._model(inputs))
-                out.append(preds["flows"][0, 0].permute(1, 2, 0).cpu().numpy())
-        return np.stack(out).astype(np.float32)
+                out[k] = preds["flows"][0, 0].permute(1, 2, 0).cpu().numpy()
+        return out

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.flow import clip_duration, mean_window_score, rmfa_windows, video_flows
+from wsp_eval.flow import active_flows, clip_duration, mean_window_score, rmfa_windows, video_flows
 
 SUITE, TITLE = "t2", "Global trajectory coverage"
 ROLES = ("reference",)
@@ -26,9 +26,11 @@ class _Reference:
         self._flows: dict[float, object] = {}
 
     def flows(self, duration: float):
+        """The reference flows over `duration` and which of them have a non-empty active set (`active_flows`)."""
         key = round(min(duration, self.duration), 9)
         if key not in self._flows:
-            self._flows[key] = self.ref.reference_flows(self.role, key, self.backend)
+            ref = self.ref.reference_flows(self.role, key, self.backend)
+            self._flows[key] = ref, active_flows(ref.flows, ref.masks)
         return self._flows[key]
 
 
@@ -39,8 +41,8 @@ def prepare(ref, backends, role: str = "reference") -> _Reference:
 def rmfa(prepared: _Reference, frames: np.ndarray, fps: float, backend) -> tuple[float, dict]:
     """RMFA of one generated video; a video too short for one flow (or with no scorable window) scores 0."""
     duration = min(prepared.duration, clip_duration(len(frames), fps))
-    ref = prepared.flows(duration)
-    per_window = rmfa_windows(video_flows(frames, fps, duration, backend), ref.flows, ref.masks)
+    ref, needed = prepared.flows(duration)
+    per_window = rmfa_windows(video_flows(frames, fps, duration, backend, needed), ref.flows, ref.masks)
     score = mean_window_score(per_window)
     return (0.0 if score is None else score), {
         "common_seconds": duration, "flows": len(ref.flows),
