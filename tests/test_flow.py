@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from wsp_eval.flow import (
-    C, FLOW_SIZE, TAU, active_flows, active_pixels_per_window, clip_duration, reference_flows, rmfa_score, rmfa_window_score,
-    sample_times, video_flows, windows,
+    C, FLOW_SIZE, TAU, active_flows, active_pixels_per_window, clip_duration, reference_flows, rmfa_score,
+    rmfa_window_score, sample_times, video_flows, windows,
 )
 
 H, W = FLOW_SIZE[1], FLOW_SIZE[0]

@@ -8,6 +8,7 @@ import json
 from collections import Counter
 
 import numpy as np
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 import pytest
 from conftest import assert_source_episodes, instance_rows, open_lerobot
@@ -175,3 +176,21 @@ def test_plan_balances_kinds_over_eligible_tasks():
         assert set(used) == {t for t in tasks if t in KIND_TASKS[kind]} and len(set(used.values())) == 1
     with pytest.raises(ValueError, match="false_contact"):
         T4Builder(BuildConfig(suite="t4", platform="maniskill", count=3, tasks=("PushCube",)))
+
+
+def test_masks_read_by_row_group_match_a_file_without_statistics(release, rows, tmp_path):
+    """Scoring reads one episode's row group of `robot_masks.parquet`, found by its `episode_index` statistics; a
+    masks file without statistics (all episodes in one row group) is read whole and gives the same masks."""
+    import shutil
+
+    src = release / "t4_maniskill"
+    plain = tmp_path / "t4_maniskill"
+    shutil.copytree(src / "meta", plain / "meta")
+    table = pq.read_table(src / "robot_masks.parquet")
+    pq.write_table(table, plain / "robot_masks.parquet", write_statistics=False)
+    assert pq.ParquetFile(src / "robot_masks.parquet").metadata.num_row_groups > 1
+    for e in sorted({i for r in rows for i in r["episode_indices"]}):
+        for first in (True, False):
+            np.testing.assert_array_equal(reference_masks(src, e, first), reference_masks(plain, e, first))
+    assert len(reference_masks(src, rows[0]["episode_indices"][0])) == len(table.filter(
+        pc.equal(table["episode_index"], rows[0]["episode_indices"][0])))

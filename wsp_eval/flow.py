@@ -142,32 +142,73 @@ def active_pixels_per_window(flows: np.ndarray, masks: np.ndarray, tau: float = 
     return np.array([int(active[s:e].sum()) for s, e in windows(len(flows))], dtype=np.int64)
 
 
+class ReferenceWindow(NamedTuple):
+    """One window's reference side: its flows [start, end), active set M (end − start, H, W), the reference flow
+    on M (|M|, 2) and R (module docstring, step 5)."""
+
+    start: int
+    end: int
+    active: np.ndarray
+    star: np.ndarray
+    r: float
+
+
+class WindowedReference(NamedTuple):
+    """Every window of a reference (`windows`), None where M is empty: what a generated video's flows are scored
+    against, computed once per reference instead of once per seed."""
+
+    shape: tuple[int, ...]  # (K, H, W, 2) of the reference flows
+    windows: list[ReferenceWindow | None]
+
+
+def windowed_reference(f_star: np.ndarray, masks: np.ndarray, tau: float = TAU) -> WindowedReference:
+    """The windows of reference flows (K, H, W, 2) with their robot masks (K, H, W)."""
+    active = _active(f_star, masks, tau)  # once: the windows overlap
+    out: list[ReferenceWindow | None] = []
+    for a, b in windows(len(f_star)):
+        m = active[a:b]
+        if not m.any():
+            out.append(None)
+            continue
+        star = f_star[a:b][m]
+        out.append(ReferenceWindow(a, b, m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1))))))
+    return WindowedReference(f_star.shape, out)
+
+
+def score_windows(f_hat: np.ndarray, ref: WindowedReference, c: float = C) -> list[float | None]:
+    """S_w of every window, None where M is empty: S_w = 100·max(0, 1 − E / max(R, c)), E the RMS over M of
+    ‖F̂ − F*‖. `f_hat` must cover the reference's common duration (same K)."""
+    if f_hat.shape != ref.shape:
+        raise ValueError(f"generated flows {f_hat.shape} and reference flows {ref.shape} differ: sample both "
+                         "over their common duration")
+    out: list[float | None] = []
+    for w in ref.windows:
+        if w is None:
+            out.append(None)
+            continue
+        e = float(np.sqrt(np.mean(np.sum((f_hat[w.start:w.end][w.active] - w.star) ** 2, axis=-1))))
+        out.append(100.0 * max(0.0, 1.0 - e / max(w.r, c)))
+    return out
+
+
 def rmfa_window_score(f_hat: np.ndarray, f_star: np.ndarray, mask: np.ndarray, tau: float = TAU,
                       c: float = C) -> float | None:
     """S_w for one window's flows (k, H, W, 2) and masks (k, H, W); None when M is empty."""
     if f_hat.shape != f_star.shape:
         raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ")
-    return _window_score(f_hat, f_star, _active(f_star, mask, tau), c)
-
-
-def _window_score(f_hat: np.ndarray, f_star: np.ndarray, m: np.ndarray, c: float) -> float | None:
-    """S_w given the window's active set M (`_active`)."""
+    m = _active(f_star, mask, tau)
     if not m.any():
         return None
-    e = float(np.sqrt(np.mean(np.sum((f_hat[m] - f_star[m]) ** 2, axis=-1))))
-    r = float(np.sqrt(np.mean(np.sum(f_star[m] ** 2, axis=-1))))
-    return 100.0 * max(0.0, 1.0 - e / max(r, c))
+    star = f_star[m]
+    window = ReferenceWindow(0, len(f_star), m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1)))))
+    return score_windows(f_hat, WindowedReference(f_star.shape, [window]), c)[0]
 
 
 def rmfa_windows(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
                  ) -> list[float | None]:
     """S_w of every window (`windows`), None where M is empty. Both flow sequences must cover the same common
     duration (same K)."""
-    if f_hat.shape != f_star.shape:
-        raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ: sample both "
-                         "over their common duration")
-    active = _active(f_star, masks, tau)  # once: the windows overlap
-    return [_window_score(f_hat[a:b], f_star[a:b], active[a:b], c) for a, b in windows(len(f_star))]
+    return score_windows(f_hat, windowed_reference(f_star, masks, tau), c)
 
 
 def mean_window_score(per_window: list[float | None]) -> float | None:
