@@ -144,8 +144,10 @@ class ScoringVideo:
 
     @property
     def first_rgb(self) -> np.ndarray | None:
-        if self._rgb is not None or self._frames is None:
-            return None if self._rgb is None else self._rgb[0]
+        if self._rgb is not None:
+            return self._rgb[0]
+        if self._frames is None:
+            return None
         return _resize_rgb(self._frames[0], np.empty((SCORING_SIZE, SCORING_SIZE, 3), np.uint8))
 
 
@@ -434,8 +436,9 @@ def object_tracks(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot
     the colour is distinct (`colour_model`; needs an RGB video and the reference's frame-0 robot mask), else
     by anchored LK on the grey video, from a grid of radius `LK_QUERY_RADIUS`."""
     if isinstance(video, ScoringVideo):
-        if video.first_rgb is not None and robot_mask0 is not None:
-            model = colour_model(video.first_rgb, object_px, robot_mask0)
+        rgb0 = video.first_rgb
+        if rgb0 is not None and robot_mask0 is not None:
+            model = colour_model(rgb0, object_px, robot_mask0)
             if model is not None:
                 return region_tracks(video.rgb, query_grid(object_px), model)
         video = video.grey
