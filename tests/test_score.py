@@ -228,3 +228,29 @@ def test_the_copy_check_decides_exactly_as_the_mean_absolute_difference(suites_r
         decoded = InstanceReference(config, row)
         decoded.frames("reference")
         assert decoded.equals("reference", video, COPY_MAD) is is_copy
+
+
+def test_readers_of_one_reference_file_taking_turns_get_their_own_frames(suites_release):
+    """Every reader of a config's shared video file decodes from one open container (`iter_reference_frames`):
+    readers interleaved at random, as the copy check interleaves roles and seeds, get exactly the frames each
+    reads alone, and the file is opened once."""
+    from wsp_eval.reference import _open_video, iter_reference_frames
+
+    config = suites_release / "t3_maniskill"
+    episodes = sorted({e for r in pq.read_table(config / "instances.parquet").to_pylist()
+                       for e in r["episode_indices"]})[:4]
+    alone = {e: reference_frames(config, e) for e in episodes}
+    _open_video.cache_clear()
+    readers = {e: iter_reference_frames(config, e) for e in episodes}
+    got: dict[int, list[np.ndarray]] = {e: [] for e in episodes}
+    rng = np.random.default_rng(0)
+    while readers:
+        e = list(readers)[rng.integers(len(readers))]
+        frame = next(readers[e], None)
+        if frame is None:
+            del readers[e]
+        else:
+            got[e].append(frame)
+    for e in episodes:
+        np.testing.assert_array_equal(np.stack(got[e]), alone[e])
+    assert _open_video.cache_info().currsize == 1 and len(episodes) == 4

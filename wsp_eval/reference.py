@@ -54,9 +54,29 @@ def reference_size(config_dir: Path) -> tuple[int, int] | None:
     return int.from_bytes(header[20:24], "big"), int.from_bytes(header[16:20], "big")
 
 
+class _SharedVideo:
+    """One open reference video file, shared by every reader in this process (`_open_video`): opening a paper-count
+    config's file (tens of thousands of frames) parses its index for 10–15 ms, once per instance otherwise. A
+    reader that finds another has used the file since its last frame seeks again (`user`)."""
+
+    def __init__(self, path: str):
+        import av
+
+        self.container = av.open(path)
+        self.stream = self.container.streams.video[0]
+        self.user: object | None = None
+
+
+@lru_cache(maxsize=4)
+def _open_video(path: str, mtime_ns: int, size: int) -> _SharedVideo:
+    return _SharedVideo(path)
+
+
 def iter_reference_frames(config_dir: Path, episode_index: int) -> Iterator[np.ndarray]:
     """The reference video of one episode, frame by frame (RGB uint8 (H, W, 3)), decoded from its shared file
-    only as far as the caller reads; a VideoError when the file is unreadable or holds too few frames."""
+    only as far as the caller reads; a VideoError when the file is unreadable or holds too few frames. Readers of
+    the same file take turns on one open container: each seeks to its next frame whenever another has read in
+    between (decoding from the keyframe before it), so the frames are those of a reader of its own."""
     import av
 
     config_dir = Path(config_dir)
@@ -68,19 +88,30 @@ def iter_reference_frames(config_dir: Path, episode_index: int) -> Iterator[np.n
                                                   file_index=ep[f"{key}/file_index"])
     start, fps, n = ep[f"{key}/from_timestamp"], info["fps"], ep["length"]
     first = int(round(start * fps))
-    found = 0
+    found, me = 0, object()
     try:
-        with av.open(str(path)) as container:
-            stream = container.streams.video[0]
-            container.seek(int(start / stream.time_base), stream=stream, backward=True, any_frame=False)
-            for f in container.decode(stream):
+        stat = path.stat()
+        video = _open_video(str(path), stat.st_mtime_ns, stat.st_size)
+        seek_to = start
+        while found < n:
+            video.user = me
+            stream = video.stream
+            video.container.seek(int(seek_to / stream.time_base), stream=stream, backward=True, any_frame=False)
+            moved = False
+            for f in video.container.decode(stream):
                 j = int(round(float(f.pts * stream.time_base) * fps))
                 if j >= first + n:
                     break
-                if j >= first:
+                if j >= first + found:
                     found += 1
                     yield f.to_ndarray(format="rgb24")
-    except av.error.FFmpegError as e:
+                    if video.user is not me:  # another reader used the file meanwhile: seek to the next frame
+                        moved, seek_to = True, (first + found) / fps
+                        break
+            if not moved:
+                break
+    except (av.error.FFmpegError, OSError) as e:
+        _open_video.cache_clear()  # a damaged container is not reused
         raise VideoError(f"{path}: unreadable reference video ({e})") from e
     if found != n:
         raise VideoError(f"{path}: episode {episode_index} has {found} decodable frames, expected {n}")
