@@ -254,3 +254,19 @@ def test_readers_of_one_reference_file_taking_turns_get_their_own_frames(suites_
     for e in episodes:
         np.testing.assert_array_equal(np.stack(got[e]), alone[e])
     assert _open_video.cache_info().currsize == 1 and len(episodes) == 4
+
+
+def test_threads_reading_one_reference_file_at_once_get_their_own_frames(suites_release):
+    """The rating page serves reference media from several threads at once; each thread decodes from a container
+    of its own (FFmpeg aborts the process when two threads decode one), so every thread gets exactly its frames."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    config = suites_release / "t3_maniskill"
+    episodes = sorted({e for r in pq.read_table(config / "instances.parquet").to_pylist()
+                       for e in r["episode_indices"]})[:4]
+    alone = {e: reference_frames(config, e) for e in episodes}
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(3):
+            together = dict(zip(episodes, pool.map(lambda e: reference_frames(config, e), episodes)))
+            for e in episodes:
+                np.testing.assert_array_equal(together[e], alone[e])

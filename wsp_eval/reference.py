@@ -6,6 +6,7 @@ from __future__ import annotations
 import glob
 import io
 import json
+import threading
 from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
@@ -55,9 +56,10 @@ def reference_size(config_dir: Path) -> tuple[int, int] | None:
 
 
 class _SharedVideo:
-    """One open reference video file, shared by every reader in this process (`_open_video`): opening a paper-count
+    """One open reference video file, shared by every reader in this thread (`_open_video`): opening a paper-count
     config's file (tens of thousands of frames) parses its index for 10–15 ms, once per instance otherwise. A
-    reader that finds another has used the file since its last frame seeks again (`user`)."""
+    reader that finds another has used the file since its last frame seeks again (`user`). Per thread, because
+    FFmpeg aborts when two threads decode one container (the rating page serves media from several threads)."""
 
     def __init__(self, path: str):
         import av
@@ -68,7 +70,7 @@ class _SharedVideo:
 
 
 @lru_cache(maxsize=4)
-def _open_video(path: str, mtime_ns: int, size: int) -> _SharedVideo:
+def _open_video(path: str, mtime_ns: int, size: int, thread: int) -> _SharedVideo:
     return _SharedVideo(path)
 
 
@@ -91,7 +93,7 @@ def iter_reference_frames(config_dir: Path, episode_index: int) -> Iterator[np.n
     found, me = 0, object()
     try:
         stat = path.stat()
-        video = _open_video(str(path), stat.st_mtime_ns, stat.st_size)
+        video = _open_video(str(path), stat.st_mtime_ns, stat.st_size, threading.get_ident())
         seek_to = start
         while found < n:
             video.user = me
