@@ -164,15 +164,16 @@ class WindowedReference(NamedTuple):
 def windowed_reference(f_star: np.ndarray, masks: np.ndarray, tau: float = TAU) -> WindowedReference:
     """The windows of reference flows (K, H, W, 2) with their robot masks (K, H, W)."""
     active = _active(f_star, masks, tau)  # once: the windows overlap
-    out: list[ReferenceWindow | None] = []
-    for a, b in windows(len(f_star)):
-        m = active[a:b]
-        if not m.any():
-            out.append(None)
-            continue
-        star = f_star[a:b][m]
-        out.append(ReferenceWindow(a, b, m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1))))))
-    return WindowedReference(f_star.shape, out)
+    return WindowedReference(f_star.shape, [_window(f_star, active, a, b) for a, b in windows(len(f_star))])
+
+
+def _window(f_star: np.ndarray, active: np.ndarray, a: int, b: int) -> ReferenceWindow | None:
+    """The reference side of the window of flows [a, b), given every flow's active set; None when M is empty."""
+    m = active[a:b]
+    if not m.any():
+        return None
+    star = f_star[a:b][m]
+    return ReferenceWindow(a, b, m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1)))))
 
 
 def score_windows(f_hat: np.ndarray, ref: WindowedReference, c: float = C) -> list[float | None]:
@@ -196,12 +197,8 @@ def rmfa_window_score(f_hat: np.ndarray, f_star: np.ndarray, mask: np.ndarray, t
     """S_w for one window's flows (k, H, W, 2) and masks (k, H, W); None when M is empty."""
     if f_hat.shape != f_star.shape:
         raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ")
-    m = _active(f_star, mask, tau)
-    if not m.any():
-        return None
-    star = f_star[m]
-    window = ReferenceWindow(0, len(f_star), m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1)))))
-    return score_windows(f_hat, WindowedReference(f_star.shape, [window]), c)[0]
+    window = _window(f_star, _active(f_star, mask, tau), 0, len(f_star))
+    return None if window is None else score_windows(f_hat, WindowedReference(f_star.shape, [window]), c)[0]
 
 
 def rmfa_windows(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C
