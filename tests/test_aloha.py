@@ -53,6 +53,17 @@ def test_head_camera_sees_both_arms_and_the_masks_are_exact(platform):
     assert left < 128 < right  # the left arm on the image's left
 
 
+def test_frame_zero_labels_the_cube_at_its_centre(platform):
+    """Frame 0 carries the tracked objects' label image at the head camera's resolution: the cube (object 0) is
+    what the camera sees at its projected centre (T4's `centre_hidden`), and no label lies on the robot."""
+    from wsp_data.builders.t4 import centre_hidden
+
+    ob = platform.reset(0)
+    assert ob.objects.shape == (240, 320) and (ob.objects == 1).sum() > 10 and not ob.objects[ob.mask > 0].any()
+    K, E = platform.camera_params()
+    assert centre_hidden(ob.objects, 0, project(ob.object_poses[0, :3], K, E, frame_size(ob.rgb))) is None
+
+
 def test_closing_one_platform_leaves_another_rendering(platform):
     """MuJoCo's own Renderer.close frees its render context in whatever GL context is current (another
     platform's); ours does not, so a build worker may close a task's simulator while keeping another."""

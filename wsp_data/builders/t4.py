@@ -10,7 +10,8 @@
   same actions are replayed. Kept if it is in view, clear of the other objects, never touched nor displaced.
   Evaluated object: the target.
 Every proposal is validated unrendered first (common validity + the kind's rule over the whole rollout);
-only then is it rendered, checked again, and tracked with `wsp_eval.tracking`: the reference gate must reach
+only then is it rendered, checked again (the evaluated object must be what the camera sees at its projected
+centre in frame 0), and tracked with `wsp_eval.tracking`: the reference gate must reach
 `GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100. A false-contact instance
 must also be one T4 can fail: its source rollout (the expert carrying the target away along the same arm path,
 from the same first frame), scored as a submission, must score 0 wherever the simulator moved the target more
@@ -53,6 +54,9 @@ PLACEMENT_TRIES = 256  # random target placements tried for spatial proximity
 MIN_TEXTURED = 5  # of the 9 query points must carry texture at frame 0
 MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object must be tracked
 REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
+CENTRE_SIGHT_MAX = 1.5  # native px: the evaluated object's nearest visible pixel lies at most this far from its
+#   projected centre at frame 0 (the centre's own pixel or a neighbour, diagonals included). Beyond it the query
+#   grid sits on whatever hides the object (a LIBERO milk carton behind the juice carton: docs/validity.md §2)
 
 
 @dataclass
@@ -92,6 +96,26 @@ def fingers_closed(k, qpos: np.ndarray) -> bool:
     """Some frame has a finger joint of the platform's `finger_dims` nearer than its `finger_closed_below` to
     closed (Panda's fingers open to ±0.04 m)."""
     return bool((np.abs(qpos[:, list(k.finger_dims)]) < k.finger_closed_below).any())
+
+
+def centre_gap(objects: np.ndarray, k: int, pixel: np.ndarray) -> float | None:
+    """Native px from object `k`'s projected frame-0 centre `pixel` (scoring frame) to its nearest visible pixel in
+    the label image `objects` (`Observation.objects`, native resolution); None when none of it is visible."""
+    h, w = objects.shape
+    u, v = ((pixel + 0.5) * (w, h) / SCORING_SIZE - 0.5)  # the scoring frame's inverse resize
+    ys, xs = np.nonzero(objects == k + 1)
+    return float(np.hypot(xs - u, ys - v).min()) if len(xs) else None
+
+
+def centre_hidden(objects: np.ndarray | None, k: int, pixel: np.ndarray) -> dict | None:
+    """Evidence that object `k` is not what the camera sees at its projected frame-0 centre: `centre_gap` beyond
+    `CENTRE_SIGHT_MAX`, or nothing of it visible; None when it is seen there, or the platform gives no labels."""
+    if objects is None:
+        return None
+    gap = centre_gap(objects, k, pixel)
+    if gap is not None and gap <= CENTRE_SIGHT_MAX:
+        return None
+    return {"object_pixels": int((objects == k + 1).sum()), "centre_gap": gap}
 
 
 def false_contact(rig, base, source: np.ndarray, sight: Sight) -> Proposal | str:
@@ -206,6 +230,8 @@ class T4Builder(SuiteBuilder):
         k = proposal.index
         pixel = project(ref.observations[0].object_poses[k, :3], ref.intrinsic, ref.extrinsic,
                         frame_size(ref.observations[0].rgb))
+        if (hidden := centre_hidden(ref.observations[0].objects, k, pixel)) is not None:
+            return Dropped("object_hidden_at_centre", rendered, simulated, hidden)
         rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
         hands = self.hand_pixels(ref)
         video = scoring_video(rgb)

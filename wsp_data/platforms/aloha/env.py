@@ -418,7 +418,7 @@ class AlohaPlatform:
             mujoco.mj_setState(m, d, self._scenes[seed], spec)
             mujoco.mj_forward(m, d)
         self.start_poses = {name: self.object_pose(name) for name in self.free}
-        return self._observe()
+        return self._observe(first=True)
 
     def step(self, action: np.ndarray, observe: bool = True) -> Observation | None:
         self._apply(action)
@@ -426,7 +426,7 @@ class AlohaPlatform:
         mujoco.mj_forward(self.model, self.data)  # positions, contacts and cameras of the state just reached
         return self._observe() if observe else None
 
-    def _observe(self) -> Observation:
+    def _observe(self, first: bool = False) -> Observation:
         d = self.data
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         for k, name in enumerate(self.object_names):
@@ -435,11 +435,12 @@ class AlohaPlatform:
         ob = Observation(qpos=np.asarray(d.qpos[QPOS_INDEX], dtype=np.float32), tcp_pose=tcp.astype(np.float32),
                          object_poses=poses, contacts=self.contacts(), success=bool(self.spec.success_test(self)))
         if self.render:
-            ob.rgb, ob.mask = self.render_frame()
+            ob.rgb, ob.mask, ob.objects = self.render_frame(objects=first)
         return ob
 
-    def render_frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """RGB (240, 320, 3) uint8 and robot label mask (240, 320) uint8 of the head camera."""
+    def render_frame(self, objects: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """RGB (240, 320, 3) uint8, robot label mask (240, 320) uint8 of the head camera and, when `objects`, the
+        tracked objects' label image (k + 1 where object k is the visible surface, else 0)."""
         r = self._renderer
         if r is None:
             raise PlatformError("the platform was created without a renderer")
@@ -452,8 +453,13 @@ class AlohaPlatform:
             r.disable_segmentation_rendering()
         geom = (seg[..., 1] == int(mujoco.mjtObj.mjOBJ_GEOM)) & (seg[..., 0] >= 0)  # int: an enum compares per pixel
         mask = np.zeros(seg.shape[:2], dtype=np.uint8)
-        mask[geom] = self.geom_label[seg[..., 0][geom]]
-        return rgb, mask
+        ids = seg[..., 0][geom]
+        mask[geom] = self.geom_label[ids]
+        labels = None
+        if objects:
+            labels = np.zeros(seg.shape[:2], dtype=np.uint8)
+            labels[geom] = self.geom_object[ids] + 1
+        return rgb, mask, labels
 
     def camera_params(self) -> tuple[np.ndarray, np.ndarray]:
         """OpenCV intrinsics (3, 3) (pixel centres at integers) and world→camera extrinsics (3, 4, m) of the head

@@ -257,7 +257,7 @@ class LiberoPlatform:
         c.goal_pos, c.goal_ori = goal_pos.copy(), goal_ori.copy()
         self.robot.gripper.current_action = grip.copy()
         c.update(force=True)
-        return self._observe()
+        return self._observe(first=True)
 
     def set_object_pose(self, name: str, pose: np.ndarray) -> None:
         entity = self.u.objects_dict.get(name)
@@ -270,7 +270,7 @@ class LiberoPlatform:
         self.u.step(np.asarray(action, dtype=np.float64))
         return self._observe()
 
-    def _observe(self) -> Observation:
+    def _observe(self, first: bool = False) -> Observation:
         d = self.data
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         for k, name in enumerate(self.object_names):
@@ -282,7 +282,7 @@ class LiberoPlatform:
             object_poses=poses, contacts=self.contacts(), success=bool(self.u._check_success()),
         )
         if self.render:
-            ob.rgb, ob.mask = self.render_frame()
+            ob.rgb, ob.mask, ob.objects = self.render_frame(objects=first)
         return ob
 
     def contacts(self) -> np.ndarray:
@@ -296,8 +296,9 @@ class LiberoPlatform:
                     out[self.geom_object[other]] = True
         return out
 
-    def render_frame(self) -> tuple[np.ndarray, np.ndarray]:
-        """Upright RGB (128, 128, 3) uint8 and robot label mask (128, 128) uint8 of the evaluated camera."""
+    def render_frame(self, objects: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Upright RGB (128, 128, 3) uint8, robot label mask (128, 128) uint8 of the evaluated camera and, when
+        `objects`, the tracked objects' label image (k + 1 where object k is the visible surface, else 0)."""
         ctx = self.sim._render_context_offscreen
         if ctx is None:
             raise PlatformError("no offscreen render context: the platform was created without a renderer")
@@ -313,12 +314,15 @@ class LiberoPlatform:
         seg = ids[..., 0].astype(np.int64) + (ids[..., 1].astype(np.int64) << 8) + (ids[..., 2].astype(np.int64) << 16)
         scn = ctx.scn
         lut = np.zeros(scn.ngeom + 1, dtype=np.uint8)
+        olut = np.zeros(scn.ngeom + 1, dtype=np.uint8)
         for i in range(scn.ngeom):
             g = scn.geoms[i]
             if g.segid != -1 and g.objtype == mujoco.mjtObj.mjOBJ_GEOM:
                 lut[g.segid + 1] = self.geom_label[g.objid]
+                olut[g.segid + 1] = self.geom_object[g.objid] + 1
         seg[seg > scn.ngeom] = 0
-        return np.ascontiguousarray(rgb[::-1]), np.ascontiguousarray(lut[seg][::-1])
+        labels = np.ascontiguousarray(olut[seg][::-1]) if objects else None
+        return np.ascontiguousarray(rgb[::-1]), np.ascontiguousarray(lut[seg][::-1]), labels
 
     def camera_params(self) -> tuple[np.ndarray, np.ndarray]:
         """OpenCV intrinsics (3, 3) and world→camera extrinsics (3, 4) of the upright evaluated view."""

@@ -185,13 +185,13 @@ class ManiSkillPlatform:
                 actor.set_linear_velocity(torch.zeros(1, 3))
                 actor.set_angular_velocity(torch.zeros(1, 3))
             obs = self.u.get_obs()
-        return self._observe(obs)
+        return self._observe(obs, first=True)
 
     def step(self, action: np.ndarray) -> Observation:
         obs, _, _, _, _ = self.env.step(torch.as_tensor(np.asarray(action, dtype=np.float32))[None])
         return self._observe(obs)
 
-    def _observe(self, obs) -> Observation:
+    def _observe(self, obs, first: bool = False) -> Observation:
         u = self.u
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         contacts = np.zeros(MAX_OBJECTS, dtype=bool)
@@ -211,6 +211,10 @@ class ManiSkillPlatform:
             if self._lut is None:
                 self._lut = self._label_lut()
             ob.mask = self._lut[np.clip(seg, 0, len(self._lut) - 1)]
+            if first:
+                ob.objects = np.zeros(seg.shape, dtype=np.uint8)
+                for k, name in enumerate(self.object_names):
+                    ob.objects[seg == self.actor(name)._objs[0].per_scene_id] = k + 1
         return ob
 
     def robot_touches(self, actor: Actor) -> bool:
