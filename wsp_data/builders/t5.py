@@ -8,9 +8,10 @@ expert is re-run up to that step and the slot's primitive replaces the rest: the
 (`PlatformKit.t5_scene`; ManiSkill's knock-over and tap), whose source must succeed with the prop untouched.
 Validation, unrendered first: common validity (SPEC §5), no other object shifted by more than 1 cm, and the
 primitive's acceptance rule (`t5_rules`, with the platform's `t5_rule_thresholds`) on the evaluated object's
-simulator states; only then rendered, and re-checked on the rendered rollout. Slots are balanced exactly by
-primitive over the platform's primitives (`PlatformKit.t5_primitives`): slot k gets the (k mod n)-th and the
-next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn.
+simulator states; only then rendered, and re-checked on the rendered rollout; the evaluated object must be what
+the camera sees at its projected frame-0 centre, the point the judge is given (`t4.centre_hidden`). Slots are
+balanced exactly by primitive over the platform's primitives (`PlatformKit.t5_primitives`): slot k gets the
+(k mod n)-th and the next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
+from wsp_data.builders.t4 import centre_hidden
 from wsp_data.builders.t5_rules import MOTION_ONSET, check
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
@@ -112,6 +114,10 @@ class T5Builder(SuiteBuilder):
         if (why := self.reject(rig, rendered, primitive, ev)) is not None:
             return Dropped(f"rendered_{why}", steps, simulated)
         poses = rendered.stack("object_poses")
+        first = rendered.observations[0]
+        pixel = project(poses[0, ev, :3], rendered.intrinsic, rendered.extrinsic, frame_size(first.rgb))
+        if (hidden := centre_hidden(first.objects, ev, pixel)) is not None:
+            return Dropped("object_hidden_at_centre", steps, simulated, hidden)  # the judge's point would miss it
         base_xy = rig.base_xy()
         _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy, **self.thresholds)
         parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": b.branch,
@@ -121,8 +127,7 @@ class T5Builder(SuiteBuilder):
             "source": "scripted_expert+scripted_primitive", "primitive": primitive, "evaluated_object": evaluated,
             "evaluated_index": ev, "branch_step": b.branch, "first_contact_step": b.contact,
             "source_length": len(source), "robot_base_xy": base_xy,
-            "object_pixel_256": [float(x) for x in project(poses[0, ev, :3], rendered.intrinsic, rendered.extrinsic,
-                                                           frame_size(rendered.observations[0].rgb))],
+            "object_pixel_256": [float(x) for x in pixel],
             **measured, "interventions": {"reference": parameters},
         }
         src = rig.render.replay(seed, source, placements)  # the unperturbed source: the expert, no primitive
