@@ -183,6 +183,13 @@ def project(world_xyz: np.ndarray, intrinsic: np.ndarray, extrinsic: np.ndarray,
     return (uv + 0.5) * (SCORING_SIZE / size) - 0.5
 
 
+def frame_xy(object_px: tuple[float, float], width: int, height: int) -> tuple[float, float]:
+    """A 256² scoring-frame position → the same point in a W×H frame (pixel centres at integers): `project`'s
+    scaling undone."""
+    x, y = object_px
+    return (x + 0.5) * width / SCORING_SIZE - 0.5, (y + 0.5) * height / SCORING_SIZE - 0.5
+
+
 def frame_size(frame: np.ndarray) -> tuple[int, int]:
     """(width, height) of an (H, W[, C]) image: the `image_size` its camera's points project with."""
     return int(frame.shape[1]), int(frame.shape[0])

@@ -34,8 +34,8 @@ from wsp_data.builders.rig import RigCache
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
-    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, frame_size, motion_gate, object_motion,
-    project, scoring_mask, scoring_video, t4_score,
+    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, frame_size, frame_xy, motion_gate,
+    object_motion, project, scoring_mask, scoring_video, t4_score,
 )
 
 KINDS = ("distractor", "false_contact", "spatial_proximity")
@@ -101,8 +101,7 @@ def fingers_closed(k, qpos: np.ndarray) -> bool:
 def centre_gap(objects: np.ndarray, k: int, pixel: np.ndarray) -> float | None:
     """Native px from object `k`'s projected frame-0 centre `pixel` (scoring frame) to its nearest visible pixel in
     the label image `objects` (`Observation.objects`, native resolution); None when none of it is visible."""
-    h, w = objects.shape
-    u, v = ((pixel + 0.5) * (w, h) / SCORING_SIZE - 0.5)  # the scoring frame's inverse resize
+    u, v = frame_xy(pixel, objects.shape[1], objects.shape[0])
     ys, xs = np.nonzero(objects == k + 1)
     return float(np.hypot(xs - u, ys - v).min()) if len(xs) else None
 

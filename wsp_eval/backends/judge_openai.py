@@ -26,8 +26,8 @@ from PIL import Image
 
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVE_SPECS, PRIMITIVES, Verdict
+from wsp_eval.tracking import frame_xy
 
-SCORING_SIZE = 256  # px: the square frame `object_px` is given in (wsp_eval.tracking.SCORING_SIZE)
 MAX_TOKENS = 200  # the JSON answer needs ~40 tokens
 RETRY_BACKOFF_S = 1.0  # first wait before retrying a transient failure; doubles each retry
 RETRY_STATUSES = frozenset({408, 429, 500, 502, 503, 504})
@@ -41,12 +41,6 @@ _NO_PROXY = urllib.request.build_opener(urllib.request.ProxyHandler({}))
 
 class JudgeUnavailable(BackendUnavailable):
     """The judge's endpoint could not be reached or answered with an HTTP error."""
-
-
-def frame_xy(object_px: tuple[float, float], width: int, height: int) -> tuple[float, float]:
-    """A 256² scoring-frame position → the same point in a W×H frame (pixel centres at integers)."""
-    x, y = object_px
-    return (x + 0.5) * width / SCORING_SIZE - 0.5, (y + 0.5) * height / SCORING_SIZE - 0.5
 
 
 def prompt_text(object_xy_in_frame: tuple[float, float], frame_size: tuple[int, int]) -> str:
