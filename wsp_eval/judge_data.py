@@ -9,6 +9,7 @@ simulator says it shows. Kinds (`Clip.kind`) and their targets (label, agent_ok,
 | `static` | frame 0 repeated | None | False | False |
 | `approach` | the reference up to the first contact: the robot moves, the object has not moved | None | None | False |
 | `no_robot` | the reference with the robot held at its frame-0 pose (robot mask pixels of frame t replaced by a background estimate, frame 0's robot pasted back): the object moves with no robot near it | None | False | None |
+| `frozen` | the reference with the object held at its frame-0 pose: every pixel but frame t's robot is frame 0's scene (where frame 0 shows the robot, the last frame before contact that does not, else inpainted): the robot performs the primitive and nothing responds, as a world model that ignores contact draws it | None | True | False |
 | `t4` | a T4 reference (distractor, false contact, spatial proximity: the evaluated object never moves) | None | None | False |
 | `expert` | the instance's source rollout where the task's expert performs one primitive (`EXPERT_PRIMITIVE`: ManiSkill's PushCube pushes, PullCube pulls the cube ≈ 15 cm to its goal): a primitive as the task's expert does it, not as T5 scripts it | that primitive | True | True |
 
@@ -21,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pyarrow.parquet as pq
 
@@ -30,7 +32,7 @@ from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.suites.reference import InstanceReference
 
 DENSE = 2 * JUDGE_FRAMES
-T5_KINDS = ("reference", "static", "approach", "no_robot")  # `t5_clips`' default; `expert` on request
+T5_KINDS = ("reference", "static", "approach", "no_robot", "frozen")  # `t5_clips`' default; `expert` on request
 EXPERT_PRIMITIVE = {"PushCube": "push", "PullCube": "pull"}  # tasks whose expert rollout is one primitive
 MIN_APPROACH = 6  # frames before first contact needed for an approach clip
 
@@ -76,6 +78,27 @@ def without_robot(frames: np.ndarray, masks: np.ndarray) -> np.ndarray:
     return out
 
 
+def frozen_object(frames: np.ndarray, masks: np.ndarray, contact: int, idx: np.ndarray) -> np.ndarray:
+    """Frames `idx` of the clip with everything but the robot held at frame 0: the robot pixels of frame t over a
+    still scene. The scene is frame 0, where frame 0 shows the robot the last frame before `contact` (the first
+    step the robot touches the object: nothing has moved yet) that does not, else inpainted."""
+    robot = masks > 0
+    scene = frames[0].copy()
+    hole = robot[0].copy()
+    for t in range(min(contact, len(frames)) - 1, 0, -1):
+        if not hole.any():
+            break
+        seen = hole & ~robot[t]
+        scene[seen] = frames[t][seen]
+        hole &= ~seen
+    if hole.any():
+        scene = cv2.inpaint(scene, hole.astype(np.uint8), 3, cv2.INPAINT_TELEA)
+    out = np.repeat(scene[None], len(idx), axis=0)
+    for k, t in enumerate(idx):
+        out[k][robot[t]] = frames[t][robot[t]]
+    return out
+
+
 def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limit: int | None = None) -> list[Clip]:
     """The clips of every instance of a T5 config."""
     config_dir = Path(release) / config
@@ -101,6 +124,9 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limi
             idx = frame_indices(len(frames), DENSE)
             dense = without_robot(frames[idx], ref.masks("reference")[idx])
             out.append(Clip("no_robot", dense=dense, label=None, agent=False, object=None, **base))
+        if "frozen" in kinds:
+            dense = frozen_object(frames, ref.masks("reference"), contact, frame_indices(len(frames), DENSE))
+            out.append(Clip("frozen", dense=dense, label=None, agent=True, object=False, **base))
         primitive = EXPERT_PRIMITIVE.get(row["task"])
         if "expert" in kinds and primitive and row.get("source_episode_index") is not None:
             source = reference_frames(config_dir, int(row["source_episode_index"]))
