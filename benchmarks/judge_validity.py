@@ -9,6 +9,9 @@ Per platform (each `t5_<platform>` config; `t4_<platform>` configs add the still
 - approach (the reference before first contact) and T4 references (distractor, false contact, spatial
   proximity): the object never moves, so never accepted (label, agent_ok and object_ok) as push, pull, drag, tap, knock-over or drop;
 - no_robot (the object moves, the robot held at its frame-0 pose): agent_ok must be False;
+- frozen (the robot performs the primitive, the object held at its frame-0 pose, as a world model that ignores
+  contact draws it): where it visibly differs from the reference (`judge_data.visibly_different`) it must score
+  0 and never be accepted as a moving primitive; the rest (a rotate in place, mostly) are reported apart;
 - degraded references (JPEG q 40, Gaussian blur σ 1, 64×64 and back): full agreement, as for the originals;
 - expert rollouts that are one primitive (`judge_data.EXPERT_PRIMITIVE`: ManiSkill's PushCube and PullCube source
   rollouts, a push and a pull done the expert's way, not T5's): how far the verdicts carry beyond T5's scripts.
@@ -57,7 +60,8 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                 t = time.perf_counter()
                 v = judge.judge(fr, c.object_px, platform)
                 out[platform].append({"kind": kind, "instance_id": c.instance_id, "task": c.task, "seed": c.seed,
-                                      "intended": c.primitive, "expected": c.label, "label": v.label,
+                                      "intended": c.primitive, "expected": c.label, "expected_object": c.object,
+                                      "label": v.label,
                                       "agent_ok": v.agent_ok, "object_ok": v.object_ok,
                                       "seconds": time.perf_counter() - t})
     return out
@@ -88,6 +92,13 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == "t4" and r["intended"] == kind]
         s[f"t4 {kind} accepted_moving"] = (sum(map(accepted_moving, mine)), len(mine))
     s["no_robot_agent_ok"] = rate("no_robot", lambda r: r["agent_ok"])
+    full = lambda r: r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"]  # noqa: E731
+    visible = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is False]
+    unseen = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is None]
+    s["frozen_scores"] = (sum(map(full, visible)), len(visible))
+    s["frozen_accepted_moving"] = (sum(map(accepted_moving, visible)), len(visible))
+    s["frozen_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
+    s["frozen_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
     for k in DEGRADE:
         s[f"full, {k}"] = rate(f"reference, {k}", lambda r: r["label"] == r["intended"] and r["agent_ok"]
                                and r["object_ok"])
@@ -113,7 +124,13 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
               f"| approach before contact accepted as a moving primitive | {'%d / %d' % s['approach_accepted_moving']} | 0 |",
               f"| T4 still-object reference accepted as a moving primitive | {'%d / %d' % s['t4_accepted_moving']} | 0 |",
               *(f"| … T4 {k.split()[1]} | {'%d / %d' % v} | 0 |" for k, v in s.items() if k.startswith("t4 ")),
-              f"| object moves, robot held still: agent_ok | {'%d / %d' % s['no_robot_agent_ok']} | 0 |"]
+              f"| object moves, robot held still: agent_ok | {'%d / %d' % s['no_robot_agent_ok']} | 0 |",
+              f"| robot does the primitive, object held still (visibly unlike the reference): scores > 0 | "
+              f"{'%d / %d' % s['frozen_scores']} | 0 |",
+              f"| … accepted as any moving primitive | {'%d / %d' % s['frozen_accepted_moving']} | 0 |",
+              f"| … held still but not visibly unlike the reference ("
+              f"{', '.join(f'{k} {v}' for k, v in s['frozen_unseen_primitives'].items()) or 'none'}): scores > 0 | "
+              f"{'%d / %d' % s['frozen_unseen_scores']} | (no target) |"]
     for k in DEGRADE:
         good, n = s[f"full, {k}"]
         lines.append(f"| reference {k}: scores 100 | {good} / {n} (good) | as the originals |")

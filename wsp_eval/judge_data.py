@@ -9,7 +9,7 @@ simulator says it shows. Kinds (`Clip.kind`) and their targets (label, agent_ok,
 | `static` | frame 0 repeated | None | False | False |
 | `approach` | the reference up to the first contact: the robot moves, the object has not moved | None | None | False |
 | `no_robot` | the reference with the robot held at its frame-0 pose (robot mask pixels of frame t replaced by a background estimate, frame 0's robot pasted back): the object moves with no robot near it | None | False | None |
-| `frozen` | the reference with the object held at its frame-0 pose: every pixel but frame t's robot is frame 0's scene (where frame 0 shows the robot, the last frame before contact that does not, else inpainted): the robot performs the primitive and nothing responds, as a world model that ignores contact draws it | None | True | False |
+| `frozen` | the reference with the object held at its frame-0 pose: every pixel but frame t's robot is frame 0's scene (where frame 0 shows the robot, the last frame before contact that does not, else inpainted): the robot performs the primitive and nothing responds, as a world model that ignores contact draws it | None | True | False where it visibly differs from the reference (`visibly_different`), else None |
 | `t4` | a T4 reference (distractor, false contact, spatial proximity: the evaluated object never moves) | None | None | False |
 | `expert` | the instance's source rollout where the task's expert performs one primitive (`EXPERT_PRIMITIVE`: ManiSkill's PushCube pushes, PullCube pulls the cube ≈ 15 cm to its goal): a primitive as the task's expert does it, not as T5 scripts it | that primitive | True | True |
 
@@ -35,6 +35,11 @@ DENSE = 2 * JUDGE_FRAMES
 T5_KINDS = ("reference", "static", "approach", "no_robot", "frozen")  # `t5_clips`' default; `expert` on request
 EXPERT_PRIMITIVE = {"PushCube": "push", "PullCube": "pull"}  # tasks whose expert rollout is one primitive
 MIN_APPROACH = 6  # frames before first contact needed for an approach clip
+VISIBLE_LEVELS = 40  # grey levels (any channel) a pixel must change by to count as visibly changed
+VISIBLE_AREA = 9e-4  # fraction of the frame that must change in some frame: ≈ 15 px at 128², 69 at 320×240.
+#   Measured on 64 fresh ManiSkill T5 references: frozen rotates change 1–8·10⁻⁴ of the frame (a 6° yaw of a
+#   cube 4–8 px wide), every other primitive 10–143·10⁻⁴ but one drop (2·10⁻⁴); a clip below it cannot be told
+#   from its reference by eye either, so it is no negative (docs/validity.md §1).
 
 
 @dataclass
@@ -99,6 +104,13 @@ def frozen_object(frames: np.ndarray, masks: np.ndarray, contact: int, idx: np.n
     return out
 
 
+def visibly_different(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two clips (T, H, W, 3) differ visibly: in some frame at least `VISIBLE_AREA` of the pixels differ by
+    more than `VISIBLE_LEVELS` in some channel."""
+    changed = (np.abs(a.astype(np.int16) - b.astype(np.int16)).max(axis=-1) > VISIBLE_LEVELS)
+    return bool(changed.reshape(len(a), -1).sum(axis=1).max() >= VISIBLE_AREA * a.shape[1] * a.shape[2])
+
+
 def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limit: int | None = None) -> list[Clip]:
     """The clips of every instance of a T5 config."""
     config_dir = Path(release) / config
@@ -125,8 +137,10 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limi
             dense = without_robot(frames[idx], ref.masks("reference")[idx])
             out.append(Clip("no_robot", dense=dense, label=None, agent=False, object=None, **base))
         if "frozen" in kinds:
-            dense = frozen_object(frames, ref.masks("reference"), contact, frame_indices(len(frames), DENSE))
-            out.append(Clip("frozen", dense=dense, label=None, agent=True, object=False, **base))
+            idx = frame_indices(len(frames), DENSE)
+            dense = frozen_object(frames, ref.masks("reference"), contact, idx)
+            seen = visibly_different(dense, frames[idx])
+            out.append(Clip("frozen", dense=dense, label=None, agent=True, object=False if seen else None, **base))
         primitive = EXPERT_PRIMITIVE.get(row["task"])
         if "expert" in kinds and primitive and row.get("source_episode_index") is not None:
             source = reference_frames(config_dir, int(row["source_episode_index"]))
