@@ -13,16 +13,15 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
     .venv/bin/python scripts/train_judge.py judge-train judge-train2 judge-train3 judge-train-lb96 \
         --out wsp_eval/backends/weights/judge_net_v2.onnx
 
-    # ALOHA's own weights (version 3 judges ALOHA with them; ManiSkill and LIBERO keep version 2's)
-    wsp build --platform aloha --suite t5 --seed-range train --count 192 --workers 2 --out judge-train-aloha
-    wsp build --platform aloha --suite t4 --seed-range train --count 48  --workers 2 --out judge-train-aloha
-    .venv/bin/python scripts/train_judge.py judge-train-aloha --out wsp_eval/backends/weights/judge_net_v3_aloha.onnx
+    # (version 2's weights were trained before the frozen clips existed: `git checkout cd3aee8 --
+    # wsp_eval/judge_data.py` reproduces them)
 
-    # ManiSkill's version 5 (two trainings, one with --expert, averaged by scripts/ensemble_judge.py): the
-    # commands are in docs/judge.md, "ManiSkill's weights, version 5"
+    # version 6, ManiSkill's and ALOHA's weights (two trainings averaged by scripts/ensemble_judge.py for
+    # ManiSkill): the commands are in docs/judge.md, "Version 6"
 
 Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
-the approach before first contact (object false), the robot held still while the object moves (agent false),
+the approach before first contact (object false), the robot held still while the object moves (agent false), the
+robot acting over a still scene (`frozen`: object false where visibly unlike the reference),
 and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
 gain/offset, left–right mirroring, jittered frame sampling with repeated frames, a shifted object position.
 Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.

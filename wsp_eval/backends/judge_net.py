@@ -18,9 +18,10 @@ most likely primitive, and a boolean is true when its probability is ≥ 0.5. De
 thread, fixed preprocessing.
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
-by the config's platform (never by anything in the submission): ManiSkill's own (version 5: one file holding two
+by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's from version 2 (trained on ManiSkill
-and LIBERO clips), ALOHA's own (version 3). A platform without weights is refused with a message.
+and LIBERO clips), ALOHA's own (version 6). Version 6's weights trained on frozen-object clips too (the robot
+acting, the object still: `wsp_eval.judge_data`). A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
@@ -34,11 +35,11 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "5"
+NAME, VERSION = "net", "6"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
-PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v5_maniskill.onnx",
+PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v2.onnx",
-                    "aloha": WEIGHTS_DIR / "judge_net_v3_aloha.onnx"}
+                    "aloha": WEIGHTS_DIR / "judge_net_v6_aloha.onnx"}
 FRAME, SIDE = 128, 64
 VIEWS = 3
 CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
