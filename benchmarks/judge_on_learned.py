@@ -33,11 +33,11 @@ import cv2
 import numpy as np
 import pyarrow.parquet as pq
 
-from wsp_eval.backends import BackendSpec
+from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES, sample_frames
 from wsp_eval.release_format import split_config
-from wsp_eval.score import _backends
 from wsp_eval.submission import VIDEO_NAME
+from wsp_eval.tracking import frame_xy
 from wsp_eval.video import read_video
 
 TILE = 160
@@ -65,9 +65,9 @@ def _frames(clip: dict) -> np.ndarray:
 
 def _sheet(frames: np.ndarray, object_px: list[float]) -> np.ndarray:
     tiles = []
+    x, y = frame_xy(tuple(object_px), TILE, TILE)
     for k, f in enumerate(frames):
         tile = np.ascontiguousarray(cv2.resize(f, (TILE, TILE), interpolation=cv2.INTER_LINEAR))
-        x, y = ((v + 0.5) * TILE / 256 - 0.5 for v in object_px)
         cv2.circle(tile, (int(round(x)), int(round(y))), 9, (255, 40, 40), 1, cv2.LINE_AA)
         cv2.putText(tile, str(k), (3, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1, cv2.LINE_AA)
         tiles.append(tile)
@@ -119,8 +119,7 @@ def compare(folder: Path, out: Path | None) -> None:
     missing = [cid for cid in key if not labels.get(cid, {}).get("primitive")]
     if missing:
         raise SystemExit(f"{folder / 'labels.csv'}: {len(missing)} clips unlabelled (first: {missing[0]})")
-    spec = BackendSpec()
-    judge = _backends(spec, ("judge",)).judge
+    judge = make(BackendSpec(), ("judge",)).judge
     rows = []
     for cid, clip in key.items():
         lab = labels[cid]
@@ -141,9 +140,9 @@ def compare(folder: Path, out: Path | None) -> None:
         for kind in ("stays", "vanishes", "moves, primitive unclear", "unclear", "accepted", "another primitive"):
             ks = [r for r in rs if _kind(r) == kind]
             if ks:
-                labels = Counter(f"{r['judged']} ({'y' if r['object_ok'] else 'n'})" for r in ks)
+                judged = Counter(f"{r['judged']} ({'y' if r['object_ok'] else 'n'})" for r in ks)
                 print(f"  | {kind} | {len(ks)} | {sum(r['judge_accepts'] for r in ks)} | "
-                      f"{', '.join(f'{k} {n}' for k, n in labels.most_common())} |")
+                      f"{', '.join(f'{k} {n}' for k, n in judged.most_common())} |")
         decided = [r for r in rs if r["eye"] != "undecided"]
         agree = sum(r["judge_accepts"] == (r["eye"] == "accept") for r in decided)
         if decided:

@@ -84,7 +84,8 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == kind]
         return sum(bool(bad(r)) for r in mine), len(mine)
 
-    s["static_nonzero"] = rate("static", lambda r: r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"])
+    full = lambda r: r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"]  # noqa: E731 - scores 100
+    s["static_nonzero"] = rate("static", full)
     accepted_moving = lambda r: r["label"] in MOVING and r["agent_ok"] and r["object_ok"]  # noqa: E731
     s["approach_accepted_moving"] = rate("approach", accepted_moving)
     s["t4_accepted_moving"] = rate("t4", accepted_moving)
@@ -92,7 +93,6 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == "t4" and r["intended"] == kind]
         s[f"t4 {kind} accepted_moving"] = (sum(map(accepted_moving, mine)), len(mine))
     s["no_robot_agent_ok"] = rate("no_robot", lambda r: r["agent_ok"])
-    full = lambda r: r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"]  # noqa: E731
     visible = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is False]
     unseen = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is None]
     s["frozen_scores"] = (sum(map(full, visible)), len(visible))
@@ -100,8 +100,7 @@ def summarize(records: list[dict]) -> dict:
     s["frozen_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
     s["frozen_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
     for k in DEGRADE:
-        s[f"full, {k}"] = rate(f"reference, {k}", lambda r: r["label"] == r["intended"] and r["agent_ok"]
-                               and r["object_ok"])
+        s[f"full, {k}"] = rate(f"reference, {k}", full)
     s["expert_full"] = rate("expert", lambda r: r["label"] == r["expected"] and r["agent_ok"] and r["object_ok"])
     s["ms_per_clip"] = 1000 * float(np.median([r["seconds"] for r in records]))
     return s

@@ -132,12 +132,11 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limi
         if "approach" in kinds and contact >= MIN_APPROACH:
             out.append(Clip("approach", dense=_dense(frames[:contact]), label=None, agent=None, object=False,
                             **base))
+        idx = frame_indices(len(frames), DENSE)
         if "no_robot" in kinds:
-            idx = frame_indices(len(frames), DENSE)
             dense = without_robot(frames[idx], ref.masks("reference")[idx])
             out.append(Clip("no_robot", dense=dense, label=None, agent=False, object=None, **base))
         if "frozen" in kinds:
-            idx = frame_indices(len(frames), DENSE)
             dense = frozen_object(frames, ref.masks("reference"), contact, idx)
             seen = visibly_different(dense, frames[idx])
             out.append(Clip("frozen", dense=dense, label=None, agent=True, object=False if seen else None, **base))
