@@ -12,6 +12,8 @@ Per platform (each `t5_<platform>` config; `t4_<platform>` configs add the still
 - frozen (the robot performs the primitive, the object held at its frame-0 pose, as a world model that ignores
   contact draws it): where it visibly differs from the reference (`judge_data.visibly_different`) it must score
   0 and never be accepted as a moving primitive; the rest (a rotate in place, mostly) are reported apart;
+- erased (the frozen clip, but from first contact the object fades out where it stood, as world models often
+  draw it: `judge_data.erased_object`): likewise;
 - degraded references (JPEG q 40, Gaussian blur σ 1, 64×64 and back): full agreement, as for the originals;
 - expert rollouts that are one primitive (`judge_data.EXPERT_PRIMITIVE`: ManiSkill's PushCube and PullCube source
   rollouts, a push and a pull done the expert's way, not T5's): how far the verdicts carry beyond T5's scripts.
@@ -48,7 +50,7 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     out: dict[str, list[dict]] = defaultdict(list)
     for config in sorted(meta["configs"]):
         suite, platform = split_config(config)
-        clips = (t5_clips(release, config, (*T5_KINDS, "expert")) if suite == "t5"
+        clips = (t5_clips(release, config, (*T5_KINDS, "expert", "erased")) if suite == "t5"
                  else t4_clips(release, config) if suite == "t4" else [])
         for c in clips:
             frames = c.judge_frames()
@@ -93,12 +95,13 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == "t4" and r["intended"] == kind]
         s[f"t4 {kind} accepted_moving"] = (sum(map(accepted_moving, mine)), len(mine))
     s["no_robot_agent_ok"] = rate("no_robot", lambda r: r["agent_ok"])
-    visible = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is False]
-    unseen = [r for r in records if r["kind"] == "frozen" and r["expected_object"] is None]
-    s["frozen_scores"] = (sum(map(full, visible)), len(visible))
-    s["frozen_accepted_moving"] = (sum(map(accepted_moving, visible)), len(visible))
-    s["frozen_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
-    s["frozen_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
+    for kind in ("frozen", "erased"):
+        visible = [r for r in records if r["kind"] == kind and r["expected_object"] is False]
+        unseen = [r for r in records if r["kind"] == kind and r["expected_object"] is None]
+        s[f"{kind}_scores"] = (sum(map(full, visible)), len(visible))
+        s[f"{kind}_accepted_moving"] = (sum(map(accepted_moving, visible)), len(visible))
+        s[f"{kind}_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
+        s[f"{kind}_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
     for k in DEGRADE:
         s[f"full, {k}"] = rate(f"reference, {k}", full)
     s["expert_full"] = rate("expert", lambda r: r["label"] == r["expected"] and r["agent_ok"] and r["object_ok"])
@@ -129,7 +132,13 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
               f"| … accepted as any moving primitive | {'%d / %d' % s['frozen_accepted_moving']} | 0 |",
               f"| … held still but not visibly unlike the reference ("
               f"{', '.join(f'{k} {v}' for k, v in s['frozen_unseen_primitives'].items()) or 'none'}): scores > 0 | "
-              f"{'%d / %d' % s['frozen_unseen_scores']} | (no target) |"]
+              f"{'%d / %d' % s['frozen_unseen_scores']} | (no target) |",
+              f"| robot does the primitive, object fades out where it stood (visibly unlike the reference): scores > 0 | "
+              f"{'%d / %d' % s['erased_scores']} | 0 |",
+              f"| … accepted as any moving primitive | {'%d / %d' % s['erased_accepted_moving']} | 0 |",
+              f"| … not visibly unlike the reference ("
+              f"{', '.join(f'{k} {v}' for k, v in s['erased_unseen_primitives'].items()) or 'none'}): scores > 0 | "
+              f"{'%d / %d' % s['erased_unseen_scores']} | (no target) |"]
     for k in DEGRADE:
         good, n = s[f"full, {k}"]
         lines.append(f"| reference {k}: scores 100 | {good} / {n} (good) | as the originals |")

@@ -21,8 +21,8 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
 Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
 the approach before first contact (object false), the robot held still while the object moves (agent false), the
-robot acting over a still scene (`frozen`: object false where visibly unlike the reference),
-and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
+robot acting over a still scene (`frozen`: object false where visibly unlike the reference), with `--erased` the
+robot acting while the object fades out where it stood (`erased`: likewise), and every T4 reference (the robot near or touching an object that never moves: object false). Augmented toward what generated video looks like: JPEG noise, blur, down- and up-sampling, colour
 gain/offset, left–right mirroring, jittered frame sampling with repeated frames, a shifted object position.
 Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.
 The training record (data checksums, counts, epochs, losses, train accuracy) is written beside the weights.
@@ -149,13 +149,14 @@ def at_judge_size(clip: Clip) -> Clip:
     return clip
 
 
-def load_clips(releases: list[Path], expert: bool = False) -> list[Clip]:
+def load_clips(releases: list[Path], expert: bool = False, erased: bool = False) -> list[Clip]:
     """Every T4/T5 clip of the releases at the judge's frame size (with `expert`, the T5 source rollouts whose
-    task's expert performs one primitive too: kind `expert`); a clip found in more than one release (the same
+    task's expert performs one primitive too: kind `expert`; with `erased`, the object-fades-away clips: kind
+    `erased`); a clip found in more than one release (the same
     config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
     once. A clip is known by its kind, instance, task, scene seed and build seed: slot k's scene seed is the same in
     every build of a suite, so a build restricted to other tasks, or with another `--seed`, holds other clips."""
-    kinds = T5_KINDS + (("expert",) if expert else ())
+    kinds = T5_KINDS + (("expert",) if expert else ()) + (("erased",) if erased else ())
     clips, seen = [], set()
     for release in releases:
         meta = json.loads((release / RELEASE_JSON).read_text())
@@ -226,12 +227,15 @@ def main() -> None:
     ap.add_argument("--expert", action="store_true",
                     help="also train on the task experts' own primitives (T5 source rollouts of the tasks in "
                          "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); ManiSkill's version 5")
+    ap.add_argument("--erased", action="store_true",
+                    help="also train on clips where the robot acts and the object fades out where it stood (kind "
+                         "`erased`, object false): what world models often draw; LIBERO's version 7")
     args = ap.parse_args()
     torch.manual_seed(SEED)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)
     cv2.setNumThreads(1)
-    clips = [c for c in load_clips(args.releases, args.expert) if c.task not in args.exclude_tasks]
+    clips = [c for c in load_clips(args.releases, args.expert, args.erased) if c.task not in args.exclude_tasks]
     if not clips:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
     held: list[Clip] = []
@@ -270,7 +274,7 @@ def main() -> None:
         "data": [data_record(r) for r in args.releases],
         "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
         "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
-        "excluded_tasks": args.exclude_tasks, "expert": args.expert, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
+        "excluded_tasks": args.exclude_tasks, "expert": args.expert, "erased": args.erased, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
         "weight_decay": WEIGHT_DECAY, "seed": SEED,
         "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
         "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),

@@ -146,6 +146,36 @@ def test_a_frozen_object_clip_moves_the_robot_and_nothing_else(suites_release):
     assert visibly_different(out, frames[idx]) and not visibly_different(frames[idx], frames[idx])
 
 
+def test_an_erased_object_clip_fades_the_object_where_it_stood(suites_release):
+    """`erased`: the frozen clip until first contact; then the object's frame-0 footprint fades into an inpainted
+    scene while the robot pixels stay the reference's; nothing outside the footprint changes."""
+    from wsp_eval.backends.judge import frame_indices
+    from wsp_eval.judge_data import DENSE, erased_object, frozen_object, object_footprint, visibly_different
+    from wsp_eval.suites.reference import InstanceReference
+    from wsp_eval.tracking import frame_size, frame_xy
+    import pyarrow.parquet as pq
+
+    config = suites_release / "t5_maniskill"
+    rows = [r for r in pq.read_table(config / "instances.parquet").to_pylist() if r["primitive"] == "drop"]
+    ref = InstanceReference(config, rows[0])
+    frames, masks = ref.frames("reference"), ref.masks("reference")
+    x, y = frame_xy(tuple(rows[0]["object_pixel_256"]), *frame_size(frames[0]))
+    footprint = object_footprint(frames, masks, (x, y))
+    assert footprint is not None and footprint[round(y), round(x)]  # the object stood there
+    assert footprint.sum() < 0.05 * footprint.size  # the object's pixels, not the scene's
+    idx = frame_indices(len(frames), DENSE)
+    contact = int(rows[0]["first_contact_step"])
+    out, frozen = erased_object(frames, masks, contact, idx, footprint), frozen_object(frames, masks, contact, idx)
+    robot = masks[idx] > 0
+    assert np.array_equal(out[robot], frames[idx][robot])
+    before = idx < contact
+    assert before.any() and np.array_equal(out[before], frozen[before])  # nothing fades before contact
+    assert np.array_equal(out[:, ~footprint], frozen[:, ~footprint])  # only the object's pixels change
+    gone = ~robot[-1] & footprint
+    assert np.abs(out[-1][gone].astype(int) - frozen[-1][gone].astype(int)).max() > 40  # it has faded by the end
+    assert visibly_different(out, frames[idx])
+
+
 def test_scoring_with_the_net_judge_needs_no_torch(tmp_path):
     """The judge runs in the scoring-only install: OpenCV's dnn, never torch."""
     import subprocess
