@@ -27,7 +27,7 @@ from wsp_eval.backends.judge_net import CHANNELS, PLATFORM_WEIGHTS, SIDE, NetJud
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
-FROZEN_TRAINED = ("maniskill", "aloha")  # weights of version 6; LIBERO keeps version 2's
+FROZEN_TRAINED = ("maniskill", "libero", "aloha")  # every platform's weights since version 7
 ENSEMBLE = str(Path(__file__).resolve().parents[1] / "scripts" / "ensemble_judge.py")
 
 
@@ -57,7 +57,7 @@ def test_the_packaged_weights_and_their_training_record(platform):
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("6 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("7 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
     custom = NetJudge(PLATFORM_WEIGHTS["aloha"])  # --judge-checkpoint: these weights judge every platform

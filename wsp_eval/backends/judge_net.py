@@ -19,9 +19,9 @@ thread, fixed preprocessing.
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
-networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's from version 2 (trained on ManiSkill
-and LIBERO clips), ALOHA's own (version 6). Version 6's weights trained on frozen-object clips too (the robot
-acting, the object still: `wsp_eval.judge_data`). A platform without weights is refused with a message.
+networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 7), ALOHA's own
+(version 6). All three trained on frozen-object clips too (the robot acting, the object still:
+`wsp_eval.judge_data`). A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "6"
+NAME, VERSION = "net", "7"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
-                    "libero": WEIGHTS_DIR / "judge_net_v2.onnx",
+                    "libero": WEIGHTS_DIR / "judge_net_v7_libero.onnx",
                     "aloha": WEIGHTS_DIR / "judge_net_v6_aloha.onnx"}
 FRAME, SIDE = 128, 64
 VIEWS = 3
