@@ -1,8 +1,13 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # the data: T4 and T5 references on training-range seeds (never a test seed); the shipped version 2 was
-    # trained on exactly these builds, in this order (docs/judge.md)
+    # LIBERO's weights (version 7), from a fresh clone:
+    wsp build --platform libero --suite t5 --seed-range train --count 96 --workers 2 --out judge-train-lb
+    wsp build --platform libero --suite t4 --seed-range train --count 24 --workers 2 --out judge-train-lb
+    .venv/bin/python scripts/train_judge.py judge-train-lb --out wsp_eval/backends/weights/judge_net_v7_libero.onnx
+
+    # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
+    # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)
     wsp build --platform maniskill --suite t5 --seed-range train --count 128 --out judge-train
     wsp build --platform libero    --suite t5 --seed-range train --count 48  --out judge-train
     wsp build --platform maniskill --suite t4 --seed-range train --count 32  --out judge-train
