@@ -62,7 +62,7 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                 t = time.perf_counter()
                 v = judge.judge(fr, c.object_px, platform)
                 out[platform].append({"kind": kind, "instance_id": c.instance_id, "task": c.task, "seed": c.seed,
-                                      "intended": c.primitive, "expected": c.label, "expected_object": c.object,
+                                      "intended": c.primitive, "expected": c.label, "expected_object": c.object, "clear": c.clear,
                                       "label": v.label,
                                       "agent_ok": v.agent_ok, "object_ok": v.object_ok,
                                       "seconds": time.perf_counter() - t})
@@ -102,6 +102,8 @@ def summarize(records: list[dict]) -> dict:
         s[f"{kind}_accepted_moving"] = (sum(map(accepted_moving, visible)), len(visible))
         s[f"{kind}_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
         s[f"{kind}_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
+    clear = [r for r in records if r["kind"] == "erased" and r["expected_object"] is False and r.get("clear")]
+    s["erased_clear_scores"] = (sum(map(full, clear)), len(clear))
     for k in DEGRADE:
         s[f"full, {k}"] = rate(f"reference, {k}", full)
     s["expert_full"] = rate("expert", lambda r: r["label"] == r["expected"] and r["agent_ok"] and r["object_ok"])
@@ -136,6 +138,8 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
               f"| robot does the primitive, object fades out where it stood (visibly unlike the reference): scores > 0 | "
               f"{'%d / %d' % s['erased_scores']} | 0 |",
               f"| … accepted as any moving primitive | {'%d / %d' % s['erased_accepted_moving']} | 0 |",
+              f"| … of them, the reference's object visibly away from where it stood: scores > 0 | "
+              f"{'%d / %d' % s['erased_clear_scores']} | 0 |",
               f"| … not visibly unlike the reference ("
               f"{', '.join(f'{k} {v}' for k, v in s['erased_unseen_primitives'].items()) or 'none'}): scores > 0 | "
               f"{'%d / %d' % s['erased_unseen_scores']} | (no target) |"]

@@ -232,15 +232,21 @@ def main() -> None:
     ap.add_argument("--expert", action="store_true",
                     help="also train on the task experts' own primitives (T5 source rollouts of the tasks in "
                          "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); ManiSkill's version 5")
-    ap.add_argument("--erased", action="store_true",
+    ap.add_argument("--erased", nargs="?", const="all", choices=("all", "clear"),
                     help="also train on clips where the robot acts and the object fades out where it stood (kind "
-                         "`erased`, object false): what world models often draw; LIBERO's version 7")
+                         "`erased`, object false): what world models often draw. `clear`: a negative only where its "
+                         "reference shows the object visibly away from where it stood (`Clip.clear`), else no "
+                         "object target (docs/judge.md, version 7)")
     args = ap.parse_args()
     torch.manual_seed(SEED)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)
     cv2.setNumThreads(1)
-    clips = [c for c in load_clips(args.releases, args.expert, args.erased) if c.task not in args.exclude_tasks]
+    clips = [c for c in load_clips(args.releases, args.expert, bool(args.erased)) if c.task not in args.exclude_tasks]
+    if args.erased == "clear":
+        for c in clips:
+            if c.kind == "erased" and not c.clear:
+                c.object = None
     if not clips:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
     held: list[Clip] = []

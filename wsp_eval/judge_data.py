@@ -43,7 +43,7 @@ VISIBLE_AREA = 9e-4  # fraction of the frame that must change in some frame: ≈
 #   cube 4–8 px wide), every other primitive 10–143·10⁻⁴ but one drop (2·10⁻⁴); a clip below it cannot be told
 #   from its reference by eye either, so it is no negative (docs/validity.md §1).
 FOOTPRINT_RADIUS = 0.12  # of the frame's smaller side: how far from its frame-0 position the object's footprint is
-#   looked for (15 px at 128²; ManiSkill's cubes are 4–8 px wide there, LIBERO's bowls and boxes up to ≈ 20)
+#   looked for (15 px at 128², where ManiSkill's cubes are 4–8 px wide; 29 px at ALOHA's 320×240)
 
 
 @dataclass
@@ -59,6 +59,7 @@ class Clip:
     agent: bool | None
     object: bool | None
     primitive: str | None = None  # the T5 instance's intended primitive, whatever the kind (T4: its kind)
+    clear: bool | None = None  # `erased` only: the reference shows the object visibly away from where it stood
 
     def judge_frames(self) -> np.ndarray:
         return self.dense[frame_indices(len(self.dense), JUDGE_FRAMES)]
@@ -130,7 +131,7 @@ def object_footprint(frames: np.ndarray, masks: np.ndarray, object_xy: tuple[flo
     radius = FOOTPRINT_RADIUS * min(h, w)
     yy, xx = np.mgrid[:h, :w]
     dist = np.hypot(xx - object_xy[0], yy - object_xy[1])
-    n, regions = cv2.connectedComponents((changed & (dist <= radius)).astype(np.uint8), connectivity=8)
+    _, regions = cv2.connectedComponents((changed & (dist <= radius)).astype(np.uint8), connectivity=8)
     keep = np.unique(regions[(regions > 0) & (dist <= radius / 3)])
     if not len(keep):
         return None
@@ -156,10 +157,12 @@ def erased_object(frames: np.ndarray, masks: np.ndarray, contact: int, idx: np.n
     return out
 
 
-def visibly_different(a: np.ndarray, b: np.ndarray) -> bool:
-    """Whether two clips (T, H, W, 3) differ visibly: in some frame at least `VISIBLE_AREA` of the pixels differ by
-    more than `VISIBLE_LEVELS` in some channel."""
+def visibly_different(a: np.ndarray, b: np.ndarray, where: np.ndarray | None = None) -> bool:
+    """Whether two clips (T, H, W, 3) differ visibly: in some frame at least `VISIBLE_AREA` of the frame's pixels
+    (counting only those of the (H, W) mask `where`, if given) differ by more than `VISIBLE_LEVELS` in some channel."""
     changed = (np.abs(a.astype(np.int16) - b.astype(np.int16)).max(axis=-1) > VISIBLE_LEVELS)
+    if where is not None:
+        changed &= where
     return bool(changed.reshape(len(a), -1).sum(axis=1).max() >= VISIBLE_AREA * a.shape[1] * a.shape[2])
 
 
@@ -199,7 +202,7 @@ def t5_clips(release: Path, config: str, kinds: tuple[str, ...] = T5_KINDS, limi
                 dense = erased_object(frames, masks, contact, idx, footprint)
                 seen = visibly_different(dense, frames[idx])
                 out.append(Clip("erased", dense=dense, label=None, agent=True, object=False if seen else None,
-                                **base))
+                                clear=visibly_different(dense, frames[idx], ~footprint), **base))
         primitive = EXPERT_PRIMITIVE.get(row["task"])
         if "expert" in kinds and primitive and row.get("source_episode_index") is not None:
             source = reference_frames(config_dir, int(row["source_episode_index"]))
