@@ -62,8 +62,8 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                 t = time.perf_counter()
                 v = judge.judge(fr, c.object_px, platform)
                 out[platform].append({"kind": kind, "instance_id": c.instance_id, "task": c.task, "seed": c.seed,
-                                      "intended": c.primitive, "expected": c.label, "expected_object": c.object, "clear": c.clear,
-                                      "label": v.label,
+                                      "intended": c.primitive, "expected": c.label, "expected_object": c.object,
+                                      "clear": c.clear, "label": v.label,
                                       "agent_ok": v.agent_ok, "object_ok": v.object_ok,
                                       "seconds": time.perf_counter() - t})
     return out
