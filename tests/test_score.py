@@ -128,6 +128,15 @@ def test_resume_uses_the_cache_and_workers_agree(suites_scores, suites_release, 
     rescored = score_submission(sub, suites_release, first, progress=False)
     assert rescored["timing"]["instances"] == len(lines)
     assert -1.0 not in [r["score"] for r in rescored["instances"]]  # the marked record was not reused
+    # likewise a cache of another version of a backend of the same name (a retrained judge)
+    key = json.loads((first / CACHE_KEY).read_text())
+    assert key["versions"]["judge"]["name"] == "net"
+    marked, *rest = (first / CACHE).read_text().splitlines()
+    (first / CACHE).write_text("\n".join([json.dumps({**json.loads(marked), "score": -1.0}), *rest]) + "\n")
+    (first / CACHE_KEY).write_text(json.dumps({**key, "versions": {**key["versions"],
+                                                                   "judge": {"name": "net", "version": "0"}}}))
+    again = score_submission(sub, suites_release, first, progress=False)
+    assert again["timing"]["instances"] == len(lines) and -1.0 not in [r["score"] for r in again["instances"]]
 
 
 # -- aggregation on hand-built records -------------------------------------------------------------------------

@@ -16,7 +16,7 @@
   anyway, and the report says the encoding check was off (such scores are not comparable with others: codec
   noise lowers T1 most, resampling T1–T3).
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same
-  submission, release, backends and `SCORING_VERSION` skips them (another key clears the cache).
+  submission, release, backends (names and versions) and `SCORING_VERSION` skips them (another key clears the cache).
 - Parallel: instances are scored in `workers` spawned processes, each building its own backends (OpenCV
   single-threaded); or, with `executor="ray"`, as Ray tasks on a cluster (`wsp_eval.ray_tasks`; identical scores).
   Tasks carry paths, not videos: every node reads the release, the submission and the reference-flow cache at
@@ -201,11 +201,15 @@ def _rows(release: Path, config: str) -> list[dict]:
     return pq.read_table(release / config / INSTANCES).to_pylist()
 
 
-def _cache_key(submission: Path, release: Path, spec: BackendSpec, configs: list[str], accept_lossy: bool) -> dict:
+def _cache_key(submission: Path, release: Path, spec: BackendSpec, backends: backend_registry.Backends,
+               configs: list[str], accept_lossy: bool) -> dict:
+    """What the resume cache's records depend on: the inputs, the backends' names *and versions* (a retrained
+    judge keeps its name), the configs and the scoring version."""
     manifest = (submission / SUBMISSION_JSON).read_bytes()
     rel = (release / "release.json").read_bytes()
     key = {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
-           "backends": spec.to_json(), "configs": configs, "scoring_version": SCORING_VERSION}
+           "backends": spec.to_json(), "versions": backends.describe(), "configs": configs,
+           "scoring_version": SCORING_VERSION}
     return {**key, "accept_lossy": True} if accept_lossy else key
 
 
@@ -269,7 +273,7 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
     needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
     backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
     out.mkdir(parents=True, exist_ok=True)
-    done = _open_cache(out, _cache_key(submission, release, spec, configs, accept_lossy))
+    done = _open_cache(out, _cache_key(submission, release, spec, backends, configs, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
     flows = _flow_cache(release, spec, backends) if reference_cache else None
     results = {c: _result_cache(release, c, spec, backends) if reference_cache else None for c in configs}
