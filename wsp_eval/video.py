@@ -60,6 +60,7 @@ pixels score nothing; 512 admits the usual generation sizes (256², 512²) and b
 768 KiB, so a video of a reference's horizon (a few hundred frames) stays a few hundred MB at most, where one
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
 FIRST_ALLOCATION = 256  # frames allocated at most up front when no horizon bounds the video (`_decode` grows it)
+MERGE_CHUNK = 16  # planar frames interleaved per `cv2.merge` call (`_Planar`)
 
 
 def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
@@ -209,6 +210,7 @@ def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int, expe
     past `max_frames`. `expected` (the header's frame count, which can lie) only sizes the first allocation,
     within `max_frames` (or `FIRST_ALLOCATION` frames without it); more frames grow it, fewer are cut off."""
     out: np.ndarray | None = None
+    planar: _Planar | None = None
     n = 0
     for frame in decoded:
         if max_frames is not None and n == max_frames:
@@ -217,29 +219,57 @@ def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int, expe
         if out is None:
             first = min(expected, max_frames if max_frames is not None else FIRST_ALLOCATION)
             out = np.empty((max(first, 1), frame.height, frame.width, 3), np.uint8)
+            planar = _Planar(frame.height, frame.width)
         elif out.shape[1:3] != (frame.height, frame.width):
             raise VideoError(f"{path}: the resolution changes mid-video ({out.shape[2]}×{out.shape[1]} "
                              f"then {frame.width}×{frame.height}); export every frame at one resolution")
         if n == len(out):  # more frames than the header said: double, within max_frames
             grow = n if max_frames is None else min(n, max_frames - n)
             out = np.concatenate([out, np.empty((grow, *out.shape[1:]), np.uint8)])
-        _rgb(frame, out[n])
+        if frame.format.name == "gbrp":
+            planar.add(frame, out, n)
+        else:
+            planar.flush(out)
+            out[n] = frame.to_ndarray(format="rgb24")
         n += 1
-    return np.zeros((0, 0, 0, 3), np.uint8) if out is None else out[:n]
+    if out is None:
+        return np.zeros((0, 0, 0, 3), np.uint8)
+    planar.flush(out)
+    return out[:n]
 
 
-def _rgb(frame, dst: np.ndarray) -> None:
-    """A decoded frame as RGB uint8 into `dst` (H, W, 3). Planar RGB (libx264rgb's `gbrp`, what `write_video`
-    writes) is interleaved by OpenCV straight from the planes: the same bytes as libswscale's conversion, and
-    decoding takes ≈ 15 % less time (docs/measurements.md)."""
-    if frame.format.name == "gbrp":
+class _Planar:
+    """Planar RGB frames (libx264rgb's `gbrp`, what `write_video` writes) gathered `MERGE_CHUNK` at a time and
+    interleaved into the output by one `cv2.merge` per chunk: the same bytes as libswscale's conversion (and as one
+    merge per frame), without OpenCV's ≈ 10 µs of overhead per call, which at 128² was a tenth of decoding
+    (docs/measurements.md)."""
+
+    def __init__(self, height: int, width: int):
+        self.planes = np.empty((3, MERGE_CHUNK, height, width), np.uint8)  # g, b, r as the decoder gives them
+        self.start, self.count = 0, 0
+
+    def add(self, frame, out: np.ndarray, index: int) -> None:
+        """Copy `frame`'s planes in as output frame `index` (frames arrive in order)."""
+        if self.count == 0:
+            self.start = index
+        h, w = self.planes.shape[2:]
+        for k, plane in enumerate(frame.planes):
+            self.planes[k, self.count] = np.frombuffer(plane, np.uint8).reshape(h, plane.line_size)[:, :w]
+        self.count += 1
+        if self.count == MERGE_CHUNK:
+            self.flush(out)
+
+    def flush(self, out: np.ndarray) -> None:
+        """Interleave the gathered frames into `out` as RGB."""
         import cv2
 
-        g, b, r = (np.frombuffer(p, np.uint8).reshape(frame.height, p.line_size)[:, :frame.width]
-                   for p in frame.planes)
-        cv2.merge([r, g, b], dst=dst)
-    else:
-        dst[:] = frame.to_ndarray(format="rgb24")
+        k = self.count
+        if k == 0:
+            return
+        h, w = self.planes.shape[2:]
+        g, b, r = (self.planes[i, :k].reshape(k * h, w) for i in range(3))
+        cv2.merge([r, g, b], dst=out[self.start:self.start + k].reshape(k * h, w, 3))
+        self.count = 0
 
 
 def write_video(path, frames: np.ndarray, fps: float) -> None:
