@@ -150,7 +150,7 @@ def at_judge_size(clip: Clip) -> Clip:
     gives the network the same input as at scoring time); augmentation then works at that size. A no-op on
     128×128 references (ManiSkill, LIBERO); ALOHA's 320×240 frames become 6.6× cheaper to augment."""
     if clip.dense.shape[1:3] != (FRAME, FRAME):
-        clip.dense = np.stack(at_frame_size(clip.dense))
+        clip.dense = at_frame_size(clip.dense)
     return clip
 
 

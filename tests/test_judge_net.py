@@ -18,12 +18,13 @@ import json
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 
 from wsp_eval.backends.judge import score_verdict
 from wsp_eval.backends.errors import BackendUnavailable
-from wsp_eval.backends.judge_net import CHANNELS, PLATFORM_WEIGHTS, SIDE, NetJudge, judge_input
+from wsp_eval.backends.judge_net import CHANNELS, PLATFORM_WEIGHTS, SIDE, NetJudge, at_frame_size, judge_input
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -94,6 +95,15 @@ def test_input_and_determinism(judge, clips):
             == judge.judge(ref.judge_frames(), ref.object_px, ref.platform))
     up = np.repeat(np.repeat(ref.judge_frames(), 2, axis=1), 2, axis=2)  # a 256² model output: same input size
     assert judge_input(up, ref.object_px).shape == x.shape
+    # the layout the weights were trained on (module doc): the global view's frame 0, then frame i − frame 0 per
+    # colour, then the mark, which peaks at the object's frame-0 position (scoring frame 256² → global view 64²)
+    full = at_frame_size(ref.judge_frames())
+    glob = np.stack([cv2.resize(f, (SIDE, SIDE), interpolation=cv2.INTER_AREA) for f in full])
+    glob = glob.astype(np.float32).transpose(0, 3, 1, 2) / 255.0
+    np.testing.assert_array_equal(x[0, :3], glob[0])
+    np.testing.assert_array_equal(x[0, 3:3 * len(glob)], (glob[1:] - glob[:1]).reshape(-1, SIDE, SIDE))
+    peak = np.unravel_index(np.argmax(x[0, -1]), (SIDE, SIDE))[::-1]
+    assert np.allclose(peak, np.asarray(ref.object_px) / 4, atol=1)
     assert judge.judge(ref.judge_frames()[:5], ref.object_px, ref.platform).label is None  # unreadable: scores 0
 
 

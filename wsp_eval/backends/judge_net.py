@@ -46,18 +46,23 @@ CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
 MARK_SIGMA = 2.0
 
 
-def at_frame_size(frames: np.ndarray) -> list[np.ndarray]:
-    """Each RGB frame at the judge's FRAME×FRAME (area-averaged when larger, bilinear when smaller)."""
+def at_frame_size(frames: np.ndarray) -> np.ndarray:
+    """The RGB frames (N, H, W, 3) at the judge's FRAME×FRAME (area-averaged when larger, bilinear when smaller;
+    frames already at that size as they are, which is what `cv2.resize` returns for them), contiguous."""
     import cv2
 
-    h, w = np.asarray(frames).shape[1:3]
+    frames = np.asarray(frames)
+    h, w = frames.shape[1:3]
+    if (h, w) == (FRAME, FRAME):
+        return np.ascontiguousarray(frames)
     interp = cv2.INTER_AREA if min(h, w) > FRAME else cv2.INTER_LINEAR
-    return [cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp) for f in frames]
+    return np.stack([cv2.resize(np.ascontiguousarray(f), (FRAME, FRAME), interpolation=interp) for f in frames])
 
 
 def judge_input(frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarray:
     """The network's input for 12 RGB uint8 frames (12, H, W, 3) and the object's frame-0 (x, y) in the 256²
-    scoring frame."""
+    scoring frame. Written channel-first straight into the tensor: per view, frame 0's R, G, B, then frame i − frame
+    0 for i = 1…11 (R, G, B each), in [0, 1] float32; the mark last."""
     import cv2
 
     frames = np.asarray(frames)
@@ -69,15 +74,21 @@ def judge_input(frames: np.ndarray, object_px: tuple[float, float]) -> np.ndarra
     local = np.stack([cv2.getRectSubPix(f, (SIDE, SIDE), (cx, cy)) for f in full])
     zoom = np.stack([cv2.resize(cv2.getRectSubPix(f, (SIDE // 2, SIDE // 2), (cx, cy)), (SIDE, SIDE),
                                 interpolation=cv2.INTER_LINEAR) for f in full])
-    parts = []
-    for view in (glob, local, zoom):
-        v = view.astype(np.float32) / 255.0
-        parts += [v[0], (v[1:] - v[:1]).transpose(1, 2, 0, 3).reshape(SIDE, SIDE, -1)]
+    x = np.empty((1, CHANNELS, SIDE, SIDE), np.float32)
+    per_view = 3 * JUDGE_FRAMES
+    for k, view in enumerate((glob, local, zoom)):
+        v = view.transpose(0, 3, 1, 2).astype(np.float32) / 255.0  # (12, 3, SIDE, SIDE)
+        c = k * per_view
+        x[0, c:c + 3] = v[0]
+        np.subtract(v[1:], v[:1], out=x[0, c + 3:c + per_view].reshape(JUDGE_FRAMES - 1, 3, SIDE, SIDE))
+    x[0, -1] = _mark(cx * SIDE / FRAME, cy * SIDE / FRAME)
+    return x
+
+
+def _mark(gx: float, gy: float) -> np.ndarray:
+    """The object's frame-0 position in the global view: a Gaussian of σ `MARK_SIGMA` px, (SIDE, SIDE) float32."""
     yy, xx = np.mgrid[0:SIDE, 0:SIDE].astype(np.float32)
-    gx, gy = cx * SIDE / FRAME, cy * SIDE / FRAME
-    mark = np.exp(-((xx - gx) ** 2 + (yy - gy) ** 2) / (2 * MARK_SIGMA ** 2))[..., None]
-    x = np.concatenate(parts + [mark], axis=-1).transpose(2, 0, 1)
-    return np.ascontiguousarray(x[None], dtype=np.float32)
+    return np.exp(-((xx - gx) ** 2 + (yy - gy) ** 2) / (2 * MARK_SIGMA ** 2))
 
 
 def verdict_of(logits: np.ndarray) -> Verdict:
@@ -135,7 +146,8 @@ class NetJudge:
         cv2.setNumThreads(1)
         net = _net(str(self.weights_for(platform)))
         frames = np.asarray(frames)
-        mirrored = (frames[:, :, ::-1], (255.0 - float(object_px[0]), float(object_px[1])))  # pixel centres at integers
+        flipped = np.stack([cv2.flip(np.ascontiguousarray(f), 1) for f in frames])  # frames[:, :, ::-1], copied faster
+        mirrored = (flipped, (255.0 - float(object_px[0]), float(object_px[1])))  # pixel centres at integers
         out = []
         for f, px in ((frames, object_px), mirrored):
             net.setInput(judge_input(f, px))
