@@ -21,7 +21,7 @@ import pytest
 from wsp_eval.baselines import write_baseline
 from wsp_eval.score import CACHE, ScoreError, score_submission
 from wsp_eval.submission import SUBMISSION_JSON, validate
-from wsp_eval.video import MERGE_CHUNK, VideoError, read_video, write_video
+from wsp_eval.video import CHUNK_MAX_PIXELS, MERGE_CHUNK, VideoError, read_video, write_video
 
 CONFIG = "t1_maniskill"
 
@@ -142,15 +142,18 @@ def test_a_header_without_a_frame_count_decodes_every_frame(tmp_path):
         read_video(tmp_path / "a.h264", max_frames=36)
 
 
-@pytest.mark.parametrize("n", [1, MERGE_CHUNK, 2 * MERGE_CHUNK + 5])
-def test_planar_rgb_comes_back_exactly(tmp_path, n):
-    """`write_video`'s planar RGB (gbrp) is interleaved `MERGE_CHUNK` frames at a time: every frame comes back
-    exactly, at a chunk's edges, and when the array grows under a half-filled chunk (a raw stream: no count)."""
-    frames = np.random.default_rng(n).integers(0, 256, (n, 24, 40, 3), dtype=np.uint8)
+@pytest.mark.parametrize("n, height, width", [(1, 24, 40), (MERGE_CHUNK, 24, 40), (2 * MERGE_CHUNK + 5, 24, 40),
+                                              (MERGE_CHUNK + 3, 194, 192)])
+def test_planar_rgb_comes_back_exactly(tmp_path, n, height, width):
+    """`write_video`'s planar RGB (gbrp) is interleaved `MERGE_CHUNK` frames at a time (one by one above
+    `CHUNK_MAX_PIXELS`): every frame comes back exactly, at a chunk's edges, and when the array grows under a
+    half-filled chunk (a raw stream: no count)."""
+    assert (194 * 192 > CHUNK_MAX_PIXELS) and 24 * 40 <= CHUNK_MAX_PIXELS
+    frames = np.random.default_rng(n).integers(0, 256, (n, height, width, 3), dtype=np.uint8)
     write_video(tmp_path / "a.mp4", frames, 20)
     with av.open(str(tmp_path / "a.h264"), "w", format="h264") as container:
         stream = container.add_stream("libx264rgb", rate=20)
-        stream.width, stream.height, stream.pix_fmt, stream.options = 40, 24, "rgb24", {"crf": "0"}
+        stream.width, stream.height, stream.pix_fmt, stream.options = width, height, "rgb24", {"crf": "0"}
         for frame in frames:
             for packet in stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):
                 container.mux(packet)

@@ -60,7 +60,8 @@ pixels score nothing; 512 admits the usual generation sizes (256², 512²) and b
 768 KiB, so a video of a reference's horizon (a few hundred frames) stays a few hundred MB at most, where one
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
 FIRST_ALLOCATION = 256  # frames allocated at most up front when no horizon bounds the video (`_decode` grows it)
-MERGE_CHUNK = 16  # planar frames interleaved per `cv2.merge` call (`_Planar`)
+MERGE_CHUNK = 16  # planar frames interleaved per `cv2.merge` call (`_Planar`) …
+CHUNK_MAX_PIXELS = 192 * 192  # … when a frame has at most this many pixels (measured crossover: 128² gains, 320×240 loses)
 
 
 def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
@@ -239,22 +240,30 @@ def _decode(path, decoded: Iterator, max_frames: int | None, max_side: int, expe
 
 
 class _Planar:
-    """Planar RGB frames (libx264rgb's `gbrp`, what `write_video` writes) gathered `MERGE_CHUNK` at a time and
-    interleaved into the output by one `cv2.merge` per chunk: the same bytes as libswscale's conversion (and as one
-    merge per frame), without OpenCV's ≈ 10 µs of overhead per call, which at 128² was a tenth of decoding
-    (docs/measurements.md)."""
+    """Planar RGB frames (libx264rgb's `gbrp`, what `write_video` writes) interleaved into the output by
+    `cv2.merge`: the same bytes as libswscale's conversion. Frames of at most `CHUNK_MAX_PIXELS` are gathered
+    `MERGE_CHUNK` at a time and merged by one call, which saves OpenCV's per-call overhead (7 % of decoding at 128²);
+    larger ones are merged one by one, straight from the decoder's planes, where the extra copy would cost more
+    (320×240: 5 % slower gathered; docs/measurements.md)."""
 
     def __init__(self, height: int, width: int):
-        self.planes = np.empty((3, MERGE_CHUNK, height, width), np.uint8)  # g, b, r as the decoder gives them
+        self.gather = height * width <= CHUNK_MAX_PIXELS
+        self.planes = np.empty((3, MERGE_CHUNK if self.gather else 0, height, width), np.uint8)  # g, b, r
         self.start, self.count = 0, 0
 
     def add(self, frame, out: np.ndarray, index: int) -> None:
-        """Copy `frame`'s planes in as output frame `index` (frames arrive in order)."""
+        """Frame `frame` as output frame `index` (frames arrive in order)."""
+        h, w = self.planes.shape[2:]
+        g, b, r = (np.frombuffer(p, np.uint8).reshape(h, p.line_size)[:, :w] for p in frame.planes)
+        if not self.gather:
+            import cv2
+
+            cv2.merge([r, g, b], dst=out[index])
+            return
         if self.count == 0:
             self.start = index
-        h, w = self.planes.shape[2:]
-        for k, plane in enumerate(frame.planes):
-            self.planes[k, self.count] = np.frombuffer(plane, np.uint8).reshape(h, plane.line_size)[:, :w]
+        gathered = self.planes[:, self.count]
+        gathered[0], gathered[1], gathered[2] = g, b, r
         self.count += 1
         if self.count == MERGE_CHUNK:
             self.flush(out)
