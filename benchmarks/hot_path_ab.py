@@ -1,0 +1,105 @@
+"""Two source trees' scoring hot paths on the same submission videos: `read_video` on every video and, for T5
+configs, the `net` judge's logits on each video's 12 sampled frames; outputs asserted identical, CPU seconds per
+video (min of `--repeat`, the two trees interleaved, one core), and the saving projected to the paper's counts.
+
+    git worktree add /tmp/before e757a28
+    .venv/bin/python benchmarks/hot_path_ab.py /tmp/before RELEASE SUBMISSION [RELEASE SUBMISSION ...]
+
+The `before` tree is imported from its own files (`wsp_eval/video.py`, `wsp_eval/backends/judge_net.py`), this
+checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
+the two paths whose savings (a few per cent) are below that end-to-end benchmark's noise on a shared machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pyarrow.parquet as pq
+
+sys.path.insert(0, str(Path(__file__).parent))
+from score_speed import FULL_COUNTS  # noqa: E402
+
+from wsp_eval.backends import judge_net  # noqa: E402
+from wsp_eval.backends.judge import JUDGE_FRAMES  # noqa: E402
+from wsp_eval.release_format import split_config  # noqa: E402
+from wsp_eval.submission import test_configs  # noqa: E402
+from wsp_eval import video  # noqa: E402
+
+
+def _module(name: str, path: Path):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _cpu(fn, repeat: int) -> float:
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.process_time()
+        fn()
+        best = min(best, time.process_time() - t)
+    return best
+
+
+def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[dict]:
+    """Per config: instances, videos, and CPU seconds of each tree on them."""
+    old_video = _module("before_video", before / "wsp_eval" / "video.py")
+    old_judge = _module("before_judge_net", before / "wsp_eval" / "backends" / "judge_net.py")
+    out = []
+    for config in test_configs(release):
+        suite, platform = split_config(config)
+        videos = sorted((submission / config).glob("episode_*/seed*.mp4"))
+        row = {"config": config, "instances": pq.read_metadata(release / config / "instances.parquet").num_rows,
+               "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0]}
+        judges = (old_judge.NetJudge(), judge_net.NetJudge()) if suite == "t5" else ()
+        for path in videos:
+            frames = video.read_video(path)[0]
+            assert np.array_equal(old_video.read_video(path)[0], frames), path
+            for k, read in enumerate((old_video.read_video, video.read_video)):
+                row["decode"][k] += _cpu(lambda: read(path), repeat)
+            if judges:
+                clip = frames[np.linspace(0, len(frames) - 1, JUDGE_FRAMES).round().astype(int)]
+                px = (120.0, 130.0)
+                logits = [j.logits(clip, px, platform) for j in judges]
+                assert np.array_equal(*logits), path
+                for k, j in enumerate(judges):
+                    row["judge"][k] += _cpu(lambda: j.logits(clip, px, platform), repeat)
+        out.append(row)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("before", type=Path, help="the other source tree (e.g. a git worktree of an earlier commit)")
+    p.add_argument("pairs", type=Path, nargs="+", metavar="RELEASE SUBMISSION")
+    p.add_argument("--repeat", type=int, default=5, help="timings per video and tree; the least counts (default 5)")
+    args = p.parse_args(argv)
+    if len(args.pairs) % 2:
+        p.error("give RELEASE SUBMISSION pairs")
+    cv2.setNumThreads(1)
+    rows = [r for release, submission in zip(args.pairs[::2], args.pairs[1::2])
+            for r in measure(args.before, release, submission, args.repeat)]
+    print("CPU seconds over each config's videos (before → this checkout), outputs identical:")
+    print("| config | videos | decode | judge | saved ms per instance |")
+    print("|---|---:|---:|---:|---:|")
+    saved = 0.0
+    for r in rows:
+        per_instance = (r["decode"][0] - r["decode"][1] + r["judge"][0] - r["judge"][1]) / r["instances"]
+        suite, platform = split_config(r["config"])
+        saved += per_instance * FULL_COUNTS[platform][suite]
+        judge = f"{r['judge'][0]:.3f} → {r['judge'][1]:.3f}" if r["judge"][0] else "—"
+        print(f"| {r['config']} | {r['videos']} | {r['decode'][0]:.3f} → {r['decode'][1]:.3f} | {judge} | "
+              f"{1000 * per_instance:.1f} |")
+    print(f"saved at the paper's counts: {saved:.0f} core-seconds, {saved / 120:.2f} min on 2 cores")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
