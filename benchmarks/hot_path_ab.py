@@ -1,12 +1,13 @@
-"""Two source trees' scoring hot paths on the same submission videos: `read_video` on every video and, for T5
-configs, the `net` judge's logits on each video's 12 sampled frames; outputs asserted identical, CPU seconds per
-video (min of `--repeat`, the two trees interleaved, one core), and the saving projected to the paper's counts.
+"""Two source trees' scoring hot paths on the same submission videos: `read_video` on every video, the copy check
+(`InstanceReference.equals`, every role of every seed, one reference object per instance as `wsp score` keeps it)
+and, for T5 configs, the `net` judge's logits on each video's 12 sampled frames; outputs asserted identical, CPU
+seconds (min of `--repeat`, the two trees interleaved, one core), and the saving projected to the paper's counts.
 
     git worktree add /tmp/before e757a28
     .venv/bin/python benchmarks/hot_path_ab.py /tmp/before RELEASE SUBMISSION [RELEASE SUBMISSION ...]
 
-The `before` tree is imported from its own files (`wsp_eval/video.py`, `wsp_eval/backends/judge_net.py`), this
-checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
+The `before` tree is imported from its own files (`wsp_eval/video.py`, `wsp_eval/backends/judge_net.py`,
+`wsp_eval/suites/reference.py`), this checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
 the two paths whose savings (a few per cent) are below that end-to-end benchmark's noise on a shared machine.
 """
 
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import sys
 import time
 from pathlib import Path
@@ -25,6 +27,10 @@ import pyarrow.parquet as pq
 sys.path.insert(0, str(Path(__file__).parent))
 from score_speed import FULL_COUNTS  # noqa: E402
 
+from wsp_eval.score import COPY_MAD  # noqa: E402
+from wsp_eval.submission import VIDEO_NAME  # noqa: E402
+from wsp_eval.suites import reference  # noqa: E402
+
 from wsp_eval.backends import judge_net  # noqa: E402
 from wsp_eval.backends.judge import JUDGE_FRAMES  # noqa: E402
 from wsp_eval.release_format import split_config  # noqa: E402
@@ -35,6 +41,7 @@ from wsp_eval import video  # noqa: E402
 def _module(name: str, path: Path):
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses look their module up
     spec.loader.exec_module(module)
     return module
 
@@ -52,12 +59,14 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
     """Per config: instances, videos, and CPU seconds of each tree on them."""
     old_video = _module("before_video", before / "wsp_eval" / "video.py")
     old_judge = _module("before_judge_net", before / "wsp_eval" / "backends" / "judge_net.py")
+    old_reference = _module("before_reference", before / "wsp_eval" / "suites" / "reference.py")
+    seeds = json.loads((submission / "submission.json").read_text())["seeds"]
     out = []
     for config in test_configs(release):
         suite, platform = split_config(config)
         videos = sorted((submission / config).glob("episode_*/seed*.mp4"))
         row = {"config": config, "instances": pq.read_metadata(release / config / "instances.parquet").num_rows,
-               "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0]}
+               "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0], "copy": [0.0, 0.0]}
         judges = (old_judge.NetJudge(), judge_net.NetJudge()) if suite == "t5" else ()
         for path in videos:
             frames = video.read_video(path)[0]
@@ -71,6 +80,16 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
                 assert np.array_equal(*logits), path
                 for k, j in enumerate(judges):
                     row["judge"][k] += _cpu(lambda: j.logits(clip, px, platform), repeat)
+        for instance in pq.read_table(release / config / "instances.parquet").to_pylist():
+            decoded = [{role: video.read_video(submission / config / episode / VIDEO_NAME.format(seed=seed))[0]
+                        for role, episode in zip(instance["roles"], instance["episode_ids"])} for seed in seeds]
+            verdicts = []
+            for k, module in enumerate((old_reference, reference)):
+                def check(module=module):
+                    ref = module.InstanceReference(release / config, instance)
+                    verdicts.append([ref.equals(r, v, COPY_MAD) for videos in decoded for r, v in videos.items()])
+                row["copy"][k] += _cpu(check, repeat)
+            assert all(v == verdicts[0] for v in verdicts), (config, instance["instance_id"])
         out.append(row)
     return out
 
@@ -87,15 +106,16 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for release, submission in zip(args.pairs[::2], args.pairs[1::2])
             for r in measure(args.before, release, submission, args.repeat)]
     print("CPU seconds over each config's videos (before → this checkout), outputs identical:")
-    print("| config | videos | decode | judge | saved ms per instance |")
-    print("|---|---:|---:|---:|---:|")
+    print("| config | videos | decode | copy check | judge | saved ms per instance |")
+    print("|---|---:|---:|---:|---:|---:|")
     saved = 0.0
     for r in rows:
-        per_instance = (r["decode"][0] - r["decode"][1] + r["judge"][0] - r["judge"][1]) / r["instances"]
+        per_instance = sum(r[k][0] - r[k][1] for k in ("decode", "copy", "judge")) / r["instances"]
         suite, platform = split_config(r["config"])
         saved += per_instance * FULL_COUNTS[platform][suite]
         judge = f"{r['judge'][0]:.3f} → {r['judge'][1]:.3f}" if r["judge"][0] else "—"
-        print(f"| {r['config']} | {r['videos']} | {r['decode'][0]:.3f} → {r['decode'][1]:.3f} | {judge} | "
+        print(f"| {r['config']} | {r['videos']} | {r['decode'][0]:.3f} → {r['decode'][1]:.3f} | "
+              f"{r['copy'][0]:.3f} → {r['copy'][1]:.3f} | {judge} | "
               f"{1000 * per_instance:.1f} |")
     print(f"saved at the paper's counts: {saved:.0f} core-seconds, {saved / 120:.2f} min on 2 cores")
     return 0

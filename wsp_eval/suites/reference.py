@@ -6,6 +6,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from wsp_eval.flow import ReferenceFlows, reference_flows
@@ -70,7 +71,7 @@ class InstanceReference:
         return reference_masks(self.config_dir, self.episode(role), first_only=True)[0]
 
     def equals(self, role: str, frames: np.ndarray, mad: float) -> bool:
-        """Whether `frames` (N, H, W, 3) are this role's reference video: the same shape and a mean absolute
+        """Whether `frames` (N, H, W, 3) uint8 are this role's reference video: the same shape and a mean absolute
         difference below `mad`. The reference is decoded only until the differences summed so far reach `mad`
         over the whole video (a video unlike its reference costs a few decoded frames, which the next seed
         reuses)."""
@@ -80,7 +81,7 @@ class InstanceReference:
         for k, f in enumerate(self._in_order(role)):
             if k == len(frames) or f.shape != frames.shape[1:]:
                 return False
-            total += int(np.abs(frames[k].astype(np.int16) - f).sum())
+            total += int(cv2.norm(frames[k], f, cv2.NORM_L1))  # Σ|a − b|, exact for uint8 (an integer below 2⁵³)
             if total >= budget:
                 return False
             n += 1
