@@ -143,8 +143,9 @@ def active_pixels_per_window(flows: np.ndarray, masks: np.ndarray, tau: float = 
 
 
 class ReferenceWindow(NamedTuple):
-    """One window's reference side: its flows [start, end), active set M (end − start, H, W), the reference flow
-    on M (|M|, 2) and R (module docstring, step 5)."""
+    """One window's reference side: its flows [start, end), active set M as flat indices into the window's
+    (end − start)·H·W flow vectors (ascending: the order of a boolean mask), the reference flow on M (|M|, 2) and
+    R (module docstring, step 5)."""
 
     start: int
     end: int
@@ -173,7 +174,7 @@ def _window(f_star: np.ndarray, active: np.ndarray, a: int, b: int) -> Reference
     if not m.any():
         return None
     star = f_star[a:b][m]
-    return ReferenceWindow(a, b, m, star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1)))))
+    return ReferenceWindow(a, b, np.flatnonzero(m), star, float(np.sqrt(np.mean(np.sum(star ** 2, axis=-1)))))
 
 
 def score_windows(f_hat: np.ndarray, ref: WindowedReference, c: float = C) -> list[float | None]:
@@ -187,7 +188,10 @@ def score_windows(f_hat: np.ndarray, ref: WindowedReference, c: float = C) -> li
         if w is None:
             out.append(None)
             continue
-        e = float(np.sqrt(np.mean(np.sum((f_hat[w.start:w.end][w.active] - w.star) ** 2, axis=-1))))
+        d = f_hat[w.start:w.end].reshape(-1, 2)[w.active]  # F̂ on M, as `f_hat[start:end][mask]` orders it
+        d -= w.star
+        d *= d
+        e = float(np.sqrt(np.mean(d[:, 0] + d[:, 1])))  # the float32 operations of Σ over the last axis, 4× faster
         out.append(100.0 * max(0.0, 1.0 - e / max(w.r, c)))
     return out
 
