@@ -1,13 +1,15 @@
 """Two source trees' scoring hot paths on the same submission videos: `read_video` on every video, the copy check
-(`InstanceReference.equals`, every role of every seed, one reference object per instance as `wsp score` keeps it)
-and, for T5 configs, the `net` judge's logits on each video's 12 sampled frames; outputs asserted identical, CPU
-seconds (min of `--repeat`, the two trees interleaved, one core), and the saving projected to the paper's counts.
+(`InstanceReference.equals`, every role of every seed, one reference object per instance as `wsp score` keeps it),
+for T2/T3 configs RMFA's windows (`windowed_reference` once per instance, `score_windows` per seed, on flows
+computed once) and for T5 configs the `net` judge's logits on each video's 12 sampled frames; outputs asserted
+identical, CPU seconds (min of `--repeat`, the two trees alternating, one core), and the saving projected to the
+paper's counts.
 
     git worktree add /tmp/before e757a28
     .venv/bin/python benchmarks/hot_path_ab.py /tmp/before RELEASE SUBMISSION [RELEASE SUBMISSION ...]
 
 The `before` tree is imported from its own files (`wsp_eval/video.py`, `wsp_eval/backends/judge_net.py`,
-`wsp_eval/suites/reference.py`), this checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
+`wsp_eval/suites/reference.py`, `wsp_eval/flow.py`), this checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
 the two paths whose savings (a few per cent) are below that end-to-end benchmark's noise on a shared machine.
 """
 
@@ -27,6 +29,8 @@ import pyarrow.parquet as pq
 sys.path.insert(0, str(Path(__file__).parent))
 from score_speed import FULL_COUNTS  # noqa: E402
 
+from wsp_eval import flow  # noqa: E402
+from wsp_eval.backends.flow import DISFlow  # noqa: E402
 from wsp_eval.score import COPY_MAD  # noqa: E402
 from wsp_eval.submission import VIDEO_NAME  # noqa: E402
 from wsp_eval.suites import reference  # noqa: E402
@@ -60,13 +64,15 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
     old_video = _module("before_video", before / "wsp_eval" / "video.py")
     old_judge = _module("before_judge_net", before / "wsp_eval" / "backends" / "judge_net.py")
     old_reference = _module("before_reference", before / "wsp_eval" / "suites" / "reference.py")
+    old_flow = _module("before_flow", before / "wsp_eval" / "flow.py")
     seeds = json.loads((submission / "submission.json").read_text())["seeds"]
     out = []
     for config in test_configs(release):
         suite, platform = split_config(config)
         videos = sorted((submission / config).glob("episode_*/seed*.mp4"))
         row = {"config": config, "instances": pq.read_metadata(release / config / "instances.parquet").num_rows,
-               "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0], "copy": [0.0, 0.0]}
+               "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0], "copy": [0.0, 0.0],
+               "rmfa": [0.0, 0.0]}
         judges = (old_judge.NetJudge(), judge_net.NetJudge()) if suite == "t5" else ()
         for path in videos:
             frames = video.read_video(path)[0]
@@ -90,8 +96,28 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
                     verdicts.append([ref.equals(r, v, COPY_MAD) for videos in decoded for r, v in videos.items()])
                 row["copy"][k] += _cpu(check, repeat)
             assert all(v == verdicts[0] for v in verdicts), (config, instance["instance_id"])
+            if suite in ("t2", "t3"):
+                _rmfa(row, (old_flow, flow), release / config, instance, [d["reference"] for d in decoded], repeat)
         out.append(row)
     return out
+
+
+def _rmfa(row: dict, trees: tuple, config_dir: Path, instance: dict, videos: list[np.ndarray], repeat: int) -> None:
+    """RMFA's window scoring of one instance's seeds by each tree, on flows computed once (DIS, as `wsp score`)."""
+    ref = reference.InstanceReference(config_dir, instance)
+    flows = []
+    for frames in videos:
+        duration = min(flow.clip_duration(ref.num_frames("reference"), ref.fps), flow.clip_duration(len(frames), ref.fps))
+        star = ref.reference_flows("reference", duration, DISFlow())
+        needed = flow.active_flows(star.flows, star.masks)
+        flows.append((star, flow.video_flows(frames, ref.fps, duration, DISFlow(), needed)))
+    scores = []
+    for k, tree in enumerate(trees):
+        def windows(tree=tree):
+            scores.append([tree.score_windows(f_hat, tree.windowed_reference(star.flows, star.masks))
+                           for star, f_hat in flows])
+        row["rmfa"][k] += _cpu(windows, repeat)
+    assert all(s == scores[0] for s in scores), (row["config"], instance["instance_id"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -106,16 +132,16 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for release, submission in zip(args.pairs[::2], args.pairs[1::2])
             for r in measure(args.before, release, submission, args.repeat)]
     print("CPU seconds over each config's videos (before → this checkout), outputs identical:")
-    print("| config | videos | decode | copy check | judge | saved ms per instance |")
-    print("|---|---:|---:|---:|---:|---:|")
+    print("| config | videos | decode | copy check | RMFA windows | judge | saved ms per instance |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
     saved = 0.0
     for r in rows:
-        per_instance = sum(r[k][0] - r[k][1] for k in ("decode", "copy", "judge")) / r["instances"]
+        per_instance = sum(r[k][0] - r[k][1] for k in ("decode", "copy", "rmfa", "judge")) / r["instances"]
         suite, platform = split_config(r["config"])
         saved += per_instance * FULL_COUNTS[platform][suite]
-        judge = f"{r['judge'][0]:.3f} → {r['judge'][1]:.3f}" if r["judge"][0] else "—"
+        judge, rmfa = (f"{r[k][0]:.3f} → {r[k][1]:.3f}" if r[k][0] else "—" for k in ("judge", "rmfa"))
         print(f"| {r['config']} | {r['videos']} | {r['decode'][0]:.3f} → {r['decode'][1]:.3f} | "
-              f"{r['copy'][0]:.3f} → {r['copy'][1]:.3f} | {judge} | "
+              f"{r['copy'][0]:.3f} → {r['copy'][1]:.3f} | {rmfa} | {judge} | "
               f"{1000 * per_instance:.1f} |")
     print(f"saved at the paper's counts: {saved:.0f} core-seconds, {saved / 120:.2f} min on 2 cores")
     return 0

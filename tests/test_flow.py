@@ -14,7 +14,7 @@ import pytest
 
 from wsp_eval.flow import (
     C, FLOW_SIZE, TAU, active_flows, active_pixels_per_window, clip_duration, reference_flows, rmfa_score,
-    rmfa_window_score, sample_times, video_flows, windows,
+    rmfa_window_score, sample_times, video_flows, windowed_reference, windows,
 )
 
 H, W = FLOW_SIZE[1], FLOW_SIZE[0]
@@ -108,6 +108,7 @@ def test_a_generated_flow_is_computed_only_where_the_reference_robot_moves():
     ref = reference_flows(still_half, halted, fps=20)
     needed = active_flows(ref.flows, ref.masks)
     assert needed[:7].all() and not needed[8:].any()  # flows 0–6 end by 1.4 s; from 1.6 s on the robot is still
+    np.testing.assert_array_equal(windowed_reference(ref.flows, ref.masks).needed, needed)  # what T2/T3 use
     generated = _moving_square(61, 1, 1)[0]
     full = video_flows(generated, 20)
     skipped = video_flows(generated, 20, needed=needed)

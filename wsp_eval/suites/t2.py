@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from wsp_eval.flow import (
-    active_flows, clip_duration, mean_window_score, score_windows, video_flows, windowed_reference,
+    clip_duration, mean_window_score, score_windows, video_flows, windowed_reference,
 )
 
 SUITE, TITLE = "t2", "Global trajectory coverage"
@@ -28,12 +28,12 @@ class _Reference:
         self._flows: dict[float, object] = {}
 
     def flows(self, duration: float):
-        """The reference's windows over `duration` (`windowed_reference`) and which of its flows have a non-empty
-        active set (`active_flows`): the only flows of a generated video RMFA reads."""
+        """The reference's windows over `duration` (`windowed_reference`), with which of its flows have a non-empty
+        active set (`needed`): the only flows of a generated video RMFA reads."""
         key = round(min(duration, self.duration), 9)
         if key not in self._flows:
             ref = self.ref.reference_flows(self.role, key, self.backend)
-            self._flows[key] = windowed_reference(ref.flows, ref.masks), active_flows(ref.flows, ref.masks)
+            self._flows[key] = windowed_reference(ref.flows, ref.masks)
         return self._flows[key]
 
 
@@ -44,11 +44,11 @@ def prepare(ref, backends, role: str = "reference") -> _Reference:
 def rmfa(prepared: _Reference, frames: np.ndarray, fps: float, backend) -> tuple[float, dict]:
     """RMFA of one generated video; a video too short for one flow (or with no scorable window) scores 0."""
     duration = min(prepared.duration, clip_duration(len(frames), fps))
-    ref, needed = prepared.flows(duration)
-    per_window = score_windows(video_flows(frames, fps, duration, backend, needed), ref)
+    ref = prepared.flows(duration)
+    per_window = score_windows(video_flows(frames, fps, duration, backend, ref.needed), ref)
     score = mean_window_score(per_window)
     return (0.0 if score is None else score), {
-        "common_seconds": duration, "flows": len(needed),
+        "common_seconds": duration, "flows": len(ref.needed),
         "windows": [None if s is None else round(s, 2) for s in per_window]}
 
 
