@@ -102,6 +102,7 @@ BACKGROUND_DELTA_E = 6.0  # CIE76 ΔE within which a pixel still looks like fram
 #   object's frame-0 surroundings: background, which the object's shape may not cover (codec noise on a
 #   lossless-contract submission is ≤ 1; a finger or its shadow is ≥ 10 away)
 SURROUND_RING = (2.0, 6.0)  # px: the object's frame-0 surroundings: pixels this far from its region
+SURROUND_BATCH = 64  # surrounding colours compared with a window at once (bounds the (batch, h, w) temporary)
 HIDDEN_AT_START = 2.0  # px: a robot pixel this close to the frame-0 region may hide part of the object, whose
 #   frame-0 shape is then no model of it: no occlusion fit for that object (its centroid, as before the fit)
 
@@ -390,8 +391,9 @@ def occlusion_fit(rgb: np.ndarray, visible: np.ndarray, model: ColourModel, esti
     coloured = np.sqrt(_squared_delta_e(planes, model.lab)) < COLOUR_DELTA_E
     unchanged = np.sqrt(_squared_delta_e(planes, model.lab0[y0:y1, x0:x1])) < BACKGROUND_DELTA_E
     nearest = np.full(planes[0].shape, np.inf, np.float32)  # to the nearest surrounding colour (sqrt is monotone)
-    for colour in model.surround:
-        np.minimum(nearest, _squared_delta_e(planes, colour), out=nearest)
+    for k in range(0, len(model.surround), SURROUND_BATCH):  # colours broadcast over the window, a batch at a time
+        batch = model.surround[k:k + SURROUND_BATCH, None, None, :]
+        np.minimum(nearest, _squared_delta_e(planes, batch).min(axis=0), out=nearest)
     like_surround = np.sqrt(nearest) < BACKGROUND_DELTA_E
     background = (~coloured & (unchanged | like_surround)).astype(np.float32)
     shape = model.shape.astype(np.float32)
