@@ -1,16 +1,17 @@
-"""Two source trees' scoring hot paths on the same submission videos: `read_video` on every video, the copy check
-(`InstanceReference.equals`, every role of every seed, one reference object per instance as `wsp score` keeps it),
-for T2/T3 configs RMFA's windows (`windowed_reference` once per instance, `score_windows` per seed, on flows
-computed once) and for T5 configs the `net` judge's logits on each video's 12 sampled frames; outputs asserted
-identical, CPU seconds (min of `--repeat`, the two trees alternating, one core), and the saving projected to the
-paper's counts.
+"""Two source trees' scoring hot paths on the same submission videos, outputs asserted identical: `read_video` on
+every video; the copy check (`InstanceReference.equals`, every role of every seed, one reference object per
+instance as `wsp score` keeps it); for T2/T3 RMFA's windows (`windowed_reference` once per instance,
+`score_windows` per seed, on flows computed once); for T4 the evaluated object's tracks (`object_tracks`); for T5
+the `net` judge's logits on each video's 12 sampled frames. CPU seconds (least of `--repeat`, the two trees
+alternating, one core), and the saving projected to the paper's counts.
 
     git worktree add /tmp/before e757a28
     .venv/bin/python benchmarks/hot_path_ab.py /tmp/before RELEASE SUBMISSION [RELEASE SUBMISSION ...]
 
-The `before` tree is imported from its own files (`wsp_eval/video.py`, `wsp_eval/backends/judge_net.py`,
-`wsp_eval/suites/reference.py`, `wsp_eval/flow.py`), this checkout's as installed. A change elsewhere in scoring is timed by `benchmarks/score_speed.py`; this script isolates
-the two paths whose savings (a few per cent) are below that end-to-end benchmark's noise on a shared machine.
+The `before` tree's `wsp_eval/video.py`, `backends/judge_net.py`, `suites/reference.py`, `flow.py` and
+`tracking.py` are imported from its files, this checkout's as installed. These paths' savings (a few per cent of
+a scoring) are below the noise of `benchmarks/score_speed.py`'s end-to-end timings on a shared machine; a change
+elsewhere in scoring is timed there.
 """
 
 from __future__ import annotations
@@ -29,17 +30,14 @@ import pyarrow.parquet as pq
 sys.path.insert(0, str(Path(__file__).parent))
 from score_speed import FULL_COUNTS  # noqa: E402
 
-from wsp_eval import flow  # noqa: E402
-from wsp_eval.backends.flow import DISFlow  # noqa: E402
-from wsp_eval.score import COPY_MAD  # noqa: E402
-from wsp_eval.submission import VIDEO_NAME  # noqa: E402
-from wsp_eval.suites import reference  # noqa: E402
-
+from wsp_eval import flow, tracking, video  # noqa: E402
 from wsp_eval.backends import judge_net  # noqa: E402
+from wsp_eval.backends.flow import DISFlow  # noqa: E402
 from wsp_eval.backends.judge import JUDGE_FRAMES  # noqa: E402
 from wsp_eval.release_format import split_config  # noqa: E402
-from wsp_eval.submission import test_configs  # noqa: E402
-from wsp_eval import video  # noqa: E402
+from wsp_eval.score import COPY_MAD  # noqa: E402
+from wsp_eval.submission import VIDEO_NAME, test_configs  # noqa: E402
+from wsp_eval.suites import reference  # noqa: E402
 
 
 def _module(name: str, path: Path):
@@ -65,6 +63,7 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
     old_judge = _module("before_judge_net", before / "wsp_eval" / "backends" / "judge_net.py")
     old_reference = _module("before_reference", before / "wsp_eval" / "suites" / "reference.py")
     old_flow = _module("before_flow", before / "wsp_eval" / "flow.py")
+    old_tracking = _module("before_tracking", before / "wsp_eval" / "tracking.py")
     seeds = json.loads((submission / "submission.json").read_text())["seeds"]
     out = []
     for config in test_configs(release):
@@ -72,7 +71,7 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
         videos = sorted((submission / config).glob("episode_*/seed*.mp4"))
         row = {"config": config, "instances": pq.read_metadata(release / config / "instances.parquet").num_rows,
                "videos": len(videos), "decode": [0.0, 0.0], "judge": [0.0, 0.0], "copy": [0.0, 0.0],
-               "rmfa": [0.0, 0.0]}
+               "rmfa": [0.0, 0.0], "object": [0.0, 0.0]}
         judges = (old_judge.NetJudge(), judge_net.NetJudge()) if suite == "t5" else ()
         for path in videos:
             frames = video.read_video(path)[0]
@@ -98,6 +97,9 @@ def measure(before: Path, release: Path, submission: Path, repeat: int) -> list[
             assert all(v == verdicts[0] for v in verdicts), (config, instance["instance_id"])
             if suite in ("t2", "t3"):
                 _rmfa(row, (old_flow, flow), release / config, instance, [d["reference"] for d in decoded], repeat)
+            if suite == "t4":
+                _object(row, (old_tracking, tracking), release / config, instance, [d["reference"] for d in decoded],
+                        repeat)
         out.append(row)
     return out
 
@@ -107,7 +109,8 @@ def _rmfa(row: dict, trees: tuple, config_dir: Path, instance: dict, videos: lis
     ref = reference.InstanceReference(config_dir, instance)
     flows = []
     for frames in videos:
-        duration = min(flow.clip_duration(ref.num_frames("reference"), ref.fps), flow.clip_duration(len(frames), ref.fps))
+        duration = min(flow.clip_duration(ref.num_frames("reference"), ref.fps),
+                       flow.clip_duration(len(frames), ref.fps))
         star = ref.reference_flows("reference", duration, DISFlow())
         needed = flow.active_flows(star.flows, star.masks)
         flows.append((star, flow.video_flows(frames, ref.fps, duration, DISFlow(), needed)))
@@ -118,6 +121,22 @@ def _rmfa(row: dict, trees: tuple, config_dir: Path, instance: dict, videos: lis
                            for star, f_hat in flows])
         row["rmfa"][k] += _cpu(windows, repeat)
     assert all(s == scores[0] for s in scores), (row["config"], instance["instance_id"])
+
+
+def _object(row: dict, trees: tuple, config_dir: Path, instance: dict, videos: list[np.ndarray], repeat: int
+            ) -> None:
+    """The evaluated object's tracks in each seed's video by each tree (T4's default tracker)."""
+    mask0 = reference.InstanceReference(config_dir, instance).first_mask("reference")
+    px = np.asarray(instance["object_pixel_256"], np.float64)
+    tracks = []
+    for k, tree in enumerate(trees):
+        def track(tree=tree):
+            found = [tree.object_tracks(tree.scoring_video(frames), px, mask0) for frames in videos]
+            tracks.append([(t.positions, t.visible) for t in found])
+        row["object"][k] += _cpu(track, repeat)
+    for found in tracks[1:]:
+        for (p, v), (p0, v0) in zip(found, tracks[0]):
+            assert np.array_equal(p, p0) and np.array_equal(v, v0), (row["config"], instance["instance_id"])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -132,16 +151,16 @@ def main(argv: list[str] | None = None) -> int:
     rows = [r for release, submission in zip(args.pairs[::2], args.pairs[1::2])
             for r in measure(args.before, release, submission, args.repeat)]
     print("CPU seconds over each config's videos (before → this checkout), outputs identical:")
-    print("| config | videos | decode | copy check | RMFA windows | judge | saved ms per instance |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("| config | videos | decode | copy check | RMFA windows | T4 object | judge | saved ms per instance |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
     saved = 0.0
     for r in rows:
-        per_instance = sum(r[k][0] - r[k][1] for k in ("decode", "copy", "rmfa", "judge")) / r["instances"]
+        per_instance = sum(r[k][0] - r[k][1] for k in ("decode", "copy", "rmfa", "object", "judge")) / r["instances"]
         suite, platform = split_config(r["config"])
         saved += per_instance * FULL_COUNTS[platform][suite]
-        judge, rmfa = (f"{r[k][0]:.3f} → {r[k][1]:.3f}" if r[k][0] else "—" for k in ("judge", "rmfa"))
+        rmfa, obj, judge = (f"{r[k][0]:.3f} → {r[k][1]:.3f}" if r[k][0] else "—" for k in ("rmfa", "object", "judge"))
         print(f"| {r['config']} | {r['videos']} | {r['decode'][0]:.3f} → {r['decode'][1]:.3f} | "
-              f"{r['copy'][0]:.3f} → {r['copy'][1]:.3f} | {rmfa} | {judge} | "
+              f"{r['copy'][0]:.3f} → {r['copy'][1]:.3f} | {rmfa} | {obj} | {judge} | "
               f"{1000 * per_instance:.1f} |")
     print(f"saved at the paper's counts: {saved:.0f} core-seconds, {saved / 120:.2f} min on 2 cores")
     return 0
