@@ -61,7 +61,7 @@ pixels score nothing; 512 admits the usual generation sizes (256², 512²) and b
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""
 FIRST_ALLOCATION = 256  # frames allocated at most up front when no horizon bounds the video (`_decode` grows it)
 MERGE_CHUNK = 16  # planar frames interleaved per `cv2.merge` call (`_Planar`) …
-CHUNK_MAX_PIXELS = 192 * 192  # … when a frame has at most this many pixels (measured crossover: 128² gains, 320×240 loses)
+CHUNK_MAX_PIXELS = 192 * 192  # … when a frame has at most this many pixels (128² gains; 320×240 loses: `_Planar`)
 
 
 def read_video(path, max_frames: int | None = None, max_side: int = MAX_SIDE,
