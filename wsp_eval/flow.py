@@ -197,8 +197,7 @@ def score_windows(f_hat: np.ndarray, ref: WindowedReference, c: float = C) -> li
         if w is None:
             out.append(None)
             continue
-        d = f_hat[w.start:w.end].reshape(-1, 2)[w.active]  # F̂ on M, as `f_hat[start:end][mask]` orders it
-        d -= w.star
+        d = f_hat[w.start:w.end].reshape(-1, 2)[w.active] - w.star  # F̂ − F* on M, in the boolean mask's order
         e = float(np.sqrt(np.mean(_squared_norms(d))))
         out.append(100.0 * max(0.0, 1.0 - e / max(w.r, c)))
     return out
