@@ -184,6 +184,9 @@ def test_an_erased_object_clip_fades_the_object_where_it_stood(suites_release):
     gone = ~robot[-1] & footprint
     assert np.abs(out[-1][gone].astype(int) - frozen[-1][gone].astype(int)).max() > 40  # it has faded by the end
     assert visibly_different(out, frames[idx])
+    # `where` (what `Clip.clear` uses, with the footprint's complement) counts only the pixels it names
+    assert visibly_different(out, frames[idx], footprint)
+    assert not visibly_different(out, frames[idx], np.zeros_like(footprint))
 
 
 def test_scoring_with_the_net_judge_needs_no_torch(tmp_path):
