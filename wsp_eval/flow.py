@@ -133,7 +133,12 @@ def _active(flows: np.ndarray, masks: np.ndarray, tau: float) -> np.ndarray:
 def active_flows(flows: np.ndarray, masks: np.ndarray, tau: float = TAU) -> np.ndarray:
     """(K,) bool: which reference flows have a non-empty active set. Only these flows of a generated video enter
     any window's E (a flow whose M is empty contributes no pixel), so only these need computing."""
-    return _active(flows, masks, tau).reshape(len(flows), -1).any(axis=1)
+    return _nonempty(_active(flows, masks, tau))
+
+
+def _nonempty(active: np.ndarray) -> np.ndarray:
+    """(K,) bool: which of K active sets (K, H, W) hold a pixel."""
+    return active.reshape(len(active), -1).any(axis=1)
 
 
 def active_pixels_per_window(flows: np.ndarray, masks: np.ndarray, tau: float = TAU) -> np.ndarray:
@@ -160,14 +165,14 @@ class WindowedReference(NamedTuple):
 
     shape: tuple[int, ...]  # (K, H, W, 2) of the reference flows
     windows: list[ReferenceWindow | None]
-    needed: np.ndarray | None  # (K,) bool: the flows with a non-empty active set (`active_flows`)
+    needed: np.ndarray  # (K,) bool: the flows with a non-empty active set (`active_flows`)
 
 
 def windowed_reference(f_star: np.ndarray, masks: np.ndarray, tau: float = TAU) -> WindowedReference:
     """The windows of reference flows (K, H, W, 2) with their robot masks (K, H, W)."""
     active = _active(f_star, masks, tau)  # once: the windows overlap
     return WindowedReference(f_star.shape, [_window(f_star, active, a, b) for a, b in windows(len(f_star))],
-                             active.reshape(len(f_star), -1).any(axis=1))
+                             _nonempty(active))
 
 
 def _window(f_star: np.ndarray, active: np.ndarray, a: int, b: int) -> ReferenceWindow | None:
@@ -208,8 +213,11 @@ def rmfa_window_score(f_hat: np.ndarray, f_star: np.ndarray, mask: np.ndarray, t
     """S_w for one window's flows (k, H, W, 2) and masks (k, H, W); None when M is empty."""
     if f_hat.shape != f_star.shape:
         raise ValueError(f"generated flows {f_hat.shape} and reference flows {f_star.shape} differ")
-    window = _window(f_star, _active(f_star, mask, tau), 0, len(f_star))
-    return None if window is None else score_windows(f_hat, WindowedReference(f_star.shape, [window], None), c)[0]
+    active = _active(f_star, mask, tau)
+    window = _window(f_star, active, 0, len(f_star))
+    if window is None:
+        return None
+    return score_windows(f_hat, WindowedReference(f_star.shape, [window], _nonempty(active)), c)[0]
 
 
 def rmfa_windows(f_hat: np.ndarray, f_star: np.ndarray, masks: np.ndarray, tau: float = TAU, c: float = C

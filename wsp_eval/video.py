@@ -247,18 +247,19 @@ class _Planar:
     (320×240: 5 % slower gathered; docs/measurements.md)."""
 
     def __init__(self, height: int, width: int):
-        self.gather = height * width <= CHUNK_MAX_PIXELS
-        self.planes = np.empty((3, MERGE_CHUNK if self.gather else 0, height, width), np.uint8)  # g, b, r
+        import cv2
+
+        self.merge, self.height, self.width = cv2.merge, height, width
+        gather = height * width <= CHUNK_MAX_PIXELS
+        self.planes = np.empty((3, MERGE_CHUNK, height, width), np.uint8) if gather else None  # g, b, r
         self.start, self.count = 0, 0
 
     def add(self, frame, out: np.ndarray, index: int) -> None:
         """Frame `frame` as output frame `index` (frames arrive in order)."""
-        h, w = self.planes.shape[2:]
-        g, b, r = (np.frombuffer(p, np.uint8).reshape(h, p.line_size)[:, :w] for p in frame.planes)
-        if not self.gather:
-            import cv2
-
-            cv2.merge([r, g, b], dst=out[index])
+        g, b, r = (np.frombuffer(p, np.uint8).reshape(self.height, p.line_size)[:, :self.width]
+                   for p in frame.planes)
+        if self.planes is None:
+            self.merge([r, g, b], dst=out[index])
             return
         if self.count == 0:
             self.start = index
@@ -270,14 +271,12 @@ class _Planar:
 
     def flush(self, out: np.ndarray) -> None:
         """Interleave the gathered frames into `out` as RGB."""
-        import cv2
-
         k = self.count
         if k == 0:
             return
-        h, w = self.planes.shape[2:]
-        g, b, r = (self.planes[i, :k].reshape(k * h, w) for i in range(3))
-        cv2.merge([r, g, b], dst=out[self.start:self.start + k].reshape(k * h, w, 3))
+        rows = k * self.height
+        g, b, r = (self.planes[i, :k].reshape(rows, self.width) for i in range(3))
+        self.merge([r, g, b], dst=out[self.start:self.start + k].reshape(rows, self.width, 3))
         self.count = 0
 
 
