@@ -118,3 +118,53 @@ def test_seed_range_draws_scene_seeds_from_another_suites_range():
     assert scene_seed(train.scene_suite, 3, 1) == SEED_BASE["train"] + 301
     with pytest.raises(ValueError, match="unknown seed range 'test'"):
         BuildConfig("t5", "maniskill", 8, ("PickCube",), seed_range="test")
+
+
+def test_private_seed_range_keys_the_scenes_by_the_build_seed():
+    """`--seed-range private`: the build seed chooses the scenes; one build never repeats a scene; every seed lies
+    above the named ranges; `slot_attempt` inverts it (T3 finds a slot's group seed that way). A build seed alone
+    (any other range) leaves the scenes as they are, so the CLI says so."""
+    from wsp_data.builders.base import BuildConfig
+    from wsp_data.schema import MAX_ATTEMPTS, PRIVATE_BASE, PRIVATE_PRIME, SEED_BASE, SEED_SPAN
+
+    a, b = (BuildConfig("t3", "maniskill", 8, ("PickCube",), seed=s, seed_range="private") for s in (7131, 7132))
+    slots = [(k, t) for k in range(3000) for t in range(8)]  # a paper-size build's slots, 8 attempts each
+    seeds_a = [a.scene_seed(k, t) for k, t in slots]
+    assert len(set(seeds_a)) == len(slots)  # injective: no scene twice in one build
+    assert all(PRIVATE_BASE <= s < PRIVATE_BASE + PRIVATE_PRIME for s in seeds_a)
+    assert min(seeds_a) > max(SEED_BASE.values()) + SEED_SPAN and max(seeds_a) + SEED_SPAN // 2 < 2**31
+    assert len(set(seeds_a) & {b.scene_seed(k, t) for k, t in slots}) < 3  # another key: other scenes
+    assert all(a.slot_attempt(a.scene_seed(k, t)) == (k, t) for k, t in slots[::97])
+    plain = BuildConfig("t3", "maniskill", 8, ("PickCube",), seed=7131)
+    assert plain.scene_seed(5, 2) == SEED_BASE["t3"] + MAX_ATTEMPTS * 5 + 2 and plain.slot_attempt(3000502) == (5, 2)
+    with pytest.raises(ValueError, match="needs a build seed other than 0"):
+        BuildConfig("t5", "maniskill", 8, ("PickCube",), seed_range="private")
+
+
+def test_build_seed_without_private_range_says_the_scenes_stay(tmp_path):
+    r = _wsp("build", "--suite", "t1", "--count", "1", "--seed", "5", "--max-attempts", "101", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "not the scenes" in r.stderr and "--seed-range private" in r.stderr
+    assert "max_attempts must be in [1, 100]" in r.stderr and "Traceback" not in r.stderr
+    r = _wsp("build", "--suite", "t1", "--count", "1", "--seed-range", "private", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "needs a build seed other than 0" in r.stderr and not (tmp_path / "r").exists()
+
+
+def test_private_build_holds_scenes_no_public_release_has(tmp_path, t1_release):
+    """A real tiny build on the private range: its rows' scene seeds are the keyed ones of their slot and attempt,
+    none of the public release's, and release.json documents the range."""
+    from wsp_data.builders.base import BuildConfig
+
+    out = tmp_path / "private"
+    args = _build_args(out, "--count", "2", "--seed-range", "private", "--seed", "7131")
+    done = subprocess.run(args, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    config = BuildConfig.from_json(json.loads((out / "t1_maniskill" / "build_report.json").read_text())["build_config"])
+    assert config.seed_range == "private" and config.seed == 7131
+    import pyarrow.parquet as pq
+
+    rows = pq.read_table(out / "t1_maniskill" / "instances.parquet", columns=["seed", "slot", "attempt"]).to_pylist()
+    public = set(pq.read_table(t1_release / "t1_maniskill" / "instances.parquet", columns=["seed"])["seed"].to_pylist())
+    assert rows and all(r["seed"] == config.scene_seed(r["slot"], r["attempt"]) for r in rows)
+    assert not {r["seed"] for r in rows} & public
+    ranges = json.loads((out / RELEASE_JSON).read_text())["seed_ranges"]
+    assert ranges["private"][0] <= min(r["seed"] for r in rows) and max(r["seed"] for r in rows) <= ranges["private"][1]

@@ -23,7 +23,7 @@ from tqdm import tqdm
 
 from wsp_data.builders import BUILDERS, BuildConfig, Kept, builder_class
 from wsp_data.release import ReleaseError, load_release, record_build, write_release
-from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR, scene_seed
+from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
 from wsp_data.writer import write_config
 from wsp_eval.console import library_output_to, terminal
@@ -104,7 +104,7 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
     record = SlotRecord(slot)
     rollouts: list[RolloutArrays] = []
     for a in range(cfg.max_attempts):
-        seed = scene_seed(cfg.scene_suite, slot, a)
+        seed = cfg.scene_seed(slot, a)
         try:
             out = builder.attempt(plan, seed, cfg.rng(slot, a))
         except Exception as e:  # noqa: BLE001 - a simulator crash drops the proposal and is reported

@@ -24,7 +24,7 @@ import sys
 from pathlib import Path
 
 from wsp_data.platforms import KITS
-from wsp_data.schema import DEFAULT_RELEASE_NAME, SEED_BASE, SUITES
+from wsp_data.schema import DEFAULT_RELEASE_NAME, PRIVATE_RANGE, SEED_BASE, SUITES
 from wsp_eval import console
 from wsp_eval.registry import PluginError
 
@@ -69,10 +69,13 @@ def parser() -> argparse.ArgumentParser:
                    help="instances to build (default: the paper's count; train: 100 episodes per task)")
     b.add_argument("--out", type=Path, default=Path(DEFAULT_RELEASE_NAME), help="release folder (default: ./worldsimprobe)")
     b.add_argument("--tasks", nargs="+", help="restrict to these tasks (default: all solved benchmark tasks)")
-    b.add_argument("--seed", type=int, default=0, help="build seed (default 0)")
-    b.add_argument("--seed-range", choices=sorted(SEED_BASE), default="",
+    b.add_argument("--seed", type=int, default=0,
+                   help="build seed (default 0): seeds the proposals' random choices (T1's perturbation, T2's donor, "
+                        "T4's intervention); it chooses the scenes only with --seed-range private")
+    b.add_argument("--seed-range", choices=[*sorted(SEED_BASE), PRIVATE_RANGE], default="",
                    help="draw scene seeds from this suite's range instead of the config's own (e.g. `train` for "
-                        "judge-training data that never shares a scene with a test suite)")
+                        "judge-training data that never shares a scene with a test suite), or from the private "
+                        "range: scenes keyed by --seed that no public release holds (private test sets, fresh checks)")
     b.add_argument("--max-attempts", type=_positive, default=8, help="proposals per instance slot before giving up")
     b.add_argument("--shard", type=_shard, default=(0, 1), help="build only slots k with k %% n == i (i/n)")
     b.add_argument("--workers", type=_positive, default=1, help="worker processes (each holds its own simulators)")
@@ -210,6 +213,10 @@ def cmd_build(args) -> int:
     if unknown:
         listed = "\n  ".join(known)
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
+    if args.seed and args.seed_range != PRIVATE_RANGE:
+        print(f"note: --seed {args.seed} changes the proposals' random choices, not the scenes: slot k, attempt a "
+              f"still draws scene seed {SEED_BASE[args.seed_range or args.suite]:,} + 100·k + a; for scenes of this "
+              f"seed's own, add --seed-range private", file=sys.stderr)
     try:
         count = args.count or kit(args.platform).default_counts.get(args.suite) or EPISODES_PER_TASK * len(tasks)
         config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range)

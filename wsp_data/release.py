@@ -19,8 +19,8 @@ import pyarrow.parquet as pq
 import wsp_data
 from wsp_data.platforms import kit
 from wsp_data.schema import (
-    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, LOG_DIR, MAX_OBJECTS, RELEASE_JSON, SEED_BASE, SEED_SPAN,
-    STAGING_DIR,
+    CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, LOG_DIR, MAX_OBJECTS, PRIVATE_BASE, PRIVATE_PRIME, PRIVATE_RANGE,
+    RELEASE_JSON, SEED_BASE, SEED_SPAN, STAGING_DIR,
 )
 from wsp_eval.release_format import BENCHMARK_VERSION, ReleaseError, load_release
 
@@ -77,7 +77,8 @@ def write_release(root: Path, suites: dict) -> dict:
     release = {
         "name": root.name, "version": BENCHMARK_VERSION, "code_version": code_version(),
         "codebase_version": CODEBASE_VERSION, "configs": configs,
-        "seed_ranges": {k: [v, v + SEED_SPAN - 1] for k, v in SEED_BASE.items()},
+        "seed_ranges": {**{k: [v, v + SEED_SPAN - 1] for k, v in SEED_BASE.items()},
+                        PRIVATE_RANGE: [PRIVATE_BASE, PRIVATE_BASE + PRIVATE_PRIME - 1]},
     }
     _render_card(root, release, card_configs)
     _write_croissant(root, release, card_configs)

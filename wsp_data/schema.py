@@ -6,6 +6,7 @@ writer, release, tests and the evaluation side agree.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build side and tests import them from here)
@@ -22,15 +23,44 @@ EE_ACTION_DIM = 7  # TCP target position in the robot base frame, XYZ Euler angl
 MAX_ATTEMPTS = 100
 SEED_BASE = {"train": 0, "t1": 1_000_000, "t2": 2_000_000, "t3": 3_000_000, "t4": 4_000_000, "t5": 5_000_000}
 SEED_SPAN = 1_000_000
+# The private range (`--seed-range private`): scenes no public release has, chosen by the build seed. Slot k,
+# attempt a gets PRIVATE_BASE + (m·(100·k + a) + c) mod PRIVATE_PRIME, where m ≠ 0 and c come from the SHA-256 of
+# the build seed: one build never repeats a scene (a bijection mod a prime), and every seed lies above every named
+# range (and below 2³¹, with T2's donor offset added).
+PRIVATE_RANGE = "private"
+PRIVATE_BASE = 10_000_000
+PRIVATE_PRIME = 1_000_000_007
 
 
-def scene_seed(suite: str, slot: int, attempt: int) -> int:
+def _private_key(build_seed: int) -> tuple[int, int]:
+    digest = hashlib.sha256(f"worldsimprobe private scenes {build_seed}".encode()).digest()
+    return 1 + int.from_bytes(digest[:8], "big") % (PRIVATE_PRIME - 1), int.from_bytes(digest[8:16], "big") % PRIVATE_PRIME
+
+
+def scene_seed(suite: str, slot: int, attempt: int, build_seed: int = 0) -> int:
+    """Slot `slot`, attempt `attempt`'s scene seed in `suite`'s range (or the private range, keyed by
+    `build_seed`)."""
     if not 0 <= attempt < MAX_ATTEMPTS:
         raise ValueError(f"attempt {attempt} outside [0, {MAX_ATTEMPTS})")
-    seed = SEED_BASE[suite] + MAX_ATTEMPTS * slot + attempt
-    if seed >= SEED_BASE[suite] + SEED_SPAN:
+    index = MAX_ATTEMPTS * slot + attempt
+    if suite == PRIVATE_RANGE:
+        if build_seed == 0:
+            raise ValueError("the private seed range needs a build seed other than 0 (--seed): it keys the scenes")
+        m, c = _private_key(build_seed)
+        return PRIVATE_BASE + (m * index + c) % PRIVATE_PRIME
+    if index >= SEED_SPAN:
         raise ValueError(f"slot {slot} exceeds the {suite} seed range")
-    return seed
+    return SEED_BASE[suite] + index
+
+
+def slot_attempt(suite: str, seed: int, build_seed: int = 0) -> tuple[int, int]:
+    """The inverse of `scene_seed`: which slot and attempt drew `seed`."""
+    if suite == PRIVATE_RANGE:
+        m, c = _private_key(build_seed)
+        index = (seed - PRIVATE_BASE - c) * pow(m, -1, PRIVATE_PRIME) % PRIVATE_PRIME
+    else:
+        index = seed - SEED_BASE[suite]
+    return divmod(index, MAX_ATTEMPTS)
 
 
 # -- per-frame features (LeRobot) ---------------------------------------------------------------------

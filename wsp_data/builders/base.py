@@ -3,7 +3,7 @@ base class whose hooks a suite module fills in.
 
 A build has `count` slots. Slot k is planned by `SuiteBuilder.plan(k)` (default: task `tasks[k % len(tasks)]`,
 no group; suites balanced by kind or primitive override it) and tries attempts
-a = 0, 1, … (scene seed `scene_seed(config.scene_suite, k, a)`, proposal RNG seeded by (build seed, k, a)) until one
+a = 0, 1, … (scene seed `config.scene_seed(k, a)`, proposal RNG seeded by (build seed, k, a)) until one
 is kept or `max_attempts` are spent. A slot's outcome depends only on (config, k): shards, workers and
 resumed runs therefore produce the same instances.
 """
@@ -18,7 +18,7 @@ from typing import ClassVar
 import numpy as np
 
 from wsp_data.platforms import KITS, kit
-from wsp_data.schema import MAX_ATTEMPTS, SEED_BASE, SUITES
+from wsp_data.schema import MAX_ATTEMPTS, PRIVATE_RANGE, SEED_BASE, SUITES, scene_seed, slot_attempt
 from wsp_data.staging import RolloutArrays
 
 
@@ -45,13 +45,23 @@ class BuildConfig:
             raise ValueError("no tasks selected")
         if not 1 <= self.max_attempts <= MAX_ATTEMPTS:
             raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
-        if self.seed_range and self.seed_range not in SEED_BASE:
-            raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join(SEED_BASE)}")
+        if self.seed_range and self.seed_range not in (*SEED_BASE, PRIVATE_RANGE):
+            raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join((*SEED_BASE, PRIVATE_RANGE))}")
+        if self.seed_range == PRIVATE_RANGE and self.seed == 0:
+            raise ValueError("--seed-range private needs a build seed other than 0 (--seed): it keys the scenes")
 
     @property
     def scene_suite(self) -> str:
-        """Whose scene-seed range the slots draw from (`schema.SEED_BASE`)."""
+        """Whose scene-seed range the slots draw from (`schema.SEED_BASE`, or `schema.PRIVATE_RANGE`)."""
         return self.seed_range or self.suite
+
+    def scene_seed(self, slot: int, attempt: int) -> int:
+        """The scene seed of slot `slot`'s attempt `attempt` (`schema.scene_seed`)."""
+        return scene_seed(self.scene_suite, slot, attempt, self.seed)
+
+    def slot_attempt(self, seed: int) -> tuple[int, int]:
+        """The slot and attempt that drew scene seed `seed`."""
+        return slot_attempt(self.scene_suite, seed, self.seed)
 
     @property
     def name(self) -> str:

@@ -5,7 +5,7 @@ five scripted operator models H1–H5, and an early and a late behaviour-
 cloning policy checkpoint (the platform's `PlatformKit.t3_source`). Slot k belongs to group g = k // 8, gets source
 `SOURCE_GROUPS[k % 8]` and task `tasks[g % len(tasks)]`.
 
-The group's scene seed is the first candidate `scene_seed("t3", 8·g, a)` (a = 0, 1, …) on which the expert
+The group's scene seed is the first candidate `config.scene_seed(8·g, a)` (a = 0, 1, …) on which the expert
 succeeds and all eight streams replay validly without rendering (SPEC §5 common checks; successes and
 failures of operators and policies are both kept) and RMFA can score every one (≥ 1 window with active robot
 pixels). Every slot of the group evaluates the same candidates in the same order (the outcome is cached per
@@ -24,7 +24,7 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache, TaskRig
-from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, scene_seed
+from wsp_data.schema import FPS
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
 
@@ -117,8 +117,8 @@ class T3Builder(SuiteBuilder):
         return streams
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
-        slot, attempt = divmod(seed - SEED_BASE[self.config.scene_suite], MAX_ATTEMPTS)
-        group_seed = scene_seed(self.config.scene_suite, GROUP_SIZE * (slot // GROUP_SIZE), attempt)
+        slot, attempt = self.config.slot_attempt(seed)
+        group_seed = self.config.scene_seed(GROUP_SIZE * (slot // GROUP_SIZE), attempt)
         streams = self.group(plan.task, group_seed)
         if isinstance(streams, str):
             return Dropped(f"group_{streams}")
