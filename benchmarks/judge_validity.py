@@ -34,7 +34,7 @@ import numpy as np
 from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES
 from wsp_eval.judge_data import T5_KINDS, t4_clips, t5_clips
-from wsp_eval.release_format import RELEASE_JSON, split_config
+from wsp_eval.release_format import ReleaseError, load_release, split_config
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
 DEGRADE = {
@@ -46,7 +46,7 @@ DEGRADE = {
 
 def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     """platform → one record per judged clip."""
-    meta = json.loads((release / RELEASE_JSON).read_text())
+    meta = load_release(release)
     out: dict[str, list[dict]] = defaultdict(list)
     for config in sorted(meta["configs"]):
         suite, platform = split_config(config)
@@ -160,6 +160,11 @@ def main() -> None:
     ap.add_argument("--checkpoint", type=Path, help="the `net` judge's weights (default: the shipped ones)")
     ap.add_argument("--out", type=Path)
     args = ap.parse_args()
+    for release in args.releases:
+        try:
+            load_release(release)
+        except ReleaseError as e:
+            ap.error(str(e))
     cv2.setNumThreads(1)
     result = {}
     for name in args.judge:

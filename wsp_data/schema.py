@@ -43,13 +43,13 @@ def scene_seed(suite: str, slot: int, attempt: int, build_seed: int = 0) -> int:
     if not 0 <= attempt < MAX_ATTEMPTS:
         raise ValueError(f"attempt {attempt} outside [0, {MAX_ATTEMPTS})")
     index = MAX_ATTEMPTS * slot + attempt
+    if index >= (PRIVATE_PRIME if suite == PRIVATE_RANGE else SEED_SPAN):
+        raise ValueError(f"slot {slot} exceeds the {suite} seed range")
     if suite == PRIVATE_RANGE:
         if build_seed == 0:
             raise ValueError("the private seed range needs a build seed other than 0 (--seed): it keys the scenes")
         m, c = _private_key(build_seed)
         return PRIVATE_BASE + (m * index + c) % PRIVATE_PRIME
-    if index >= SEED_SPAN:
-        raise ValueError(f"slot {slot} exceeds the {suite} seed range")
     return SEED_BASE[suite] + index
 
 
