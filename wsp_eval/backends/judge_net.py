@@ -17,6 +17,12 @@ the clip and of its left–right mirror (every primitive is mirror-symmetric; tr
 most likely primitive, and a boolean is true when its probability is ≥ 0.5. Deterministic: OpenCV's dnn on one
 thread, fixed preprocessing.
 
+Since version 8, for a primitive that ends with the object released (`RELEASED`), `object_ok` also needs the
+object to be there at the end (`persists`): where its frame-0 colour is distinct, T4's colour-region tracker must
+still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an object vanish; world models often
+erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
+which may hide it, so the network decides those alone.
+
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 7), ALOHA's own
@@ -27,6 +33,7 @@ networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (v
 from __future__ import annotations
 
 import hashlib
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -35,7 +42,7 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "7"
+NAME, VERSION = "net", "8"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v7_libero.onnx",
@@ -44,6 +51,8 @@ FRAME, SIDE = 128, 64
 VIEWS = 3
 CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
 MARK_SIGMA = 2.0
+PERSIST_FRAMES = 3  # of the 12: the last quarter of the clip, where an erased object is gone (`persists`)
+RELEASED = ("push", "pull", "tap", "knock-over", "drop")  # primitives that end with the object out of the hand
 
 
 def at_frame_size(frames: np.ndarray) -> np.ndarray:
@@ -103,6 +112,21 @@ def verdict_of(logits: np.ndarray) -> Verdict:
     return Verdict(PRIMITIVES[k], bool(p_agent >= 0.5), bool(p_object >= 0.5), evidence)
 
 
+def persists(frames: np.ndarray, object_px: tuple[float, float]) -> bool | None:
+    """Whether the evaluated object is still in the clip at its end: None when its frame-0 colour is not distinct
+    (`tracking.colour_model` without a robot mask, which a judge does not get: no evidence either way), else
+    whether T4's colour-region tracker (`tracking.region_tracks`) finds it in one of the last `PERSIST_FRAMES`
+    frames. A pushed, carried, dropped or knocked-over object is still somewhere; an erased one is not."""
+    from wsp_eval.tracking import SCORING_SIZE, ScoringVideo, colour_model, query_grid, region_tracks
+
+    video = ScoringVideo(None, np.asarray(frames))  # RGB in the scoring frame only: no grey video for LK
+    px = np.asarray(object_px, np.float64)
+    model = colour_model(video.first_rgb, px, np.zeros((SCORING_SIZE, SCORING_SIZE), np.uint8))
+    if model is None:
+        return None
+    return bool(region_tracks(video.rgb, query_grid(px), model).visible[-PERSIST_FRAMES:].any())
+
+
 @lru_cache(maxsize=4)
 def _net(path: str):
     import cv2
@@ -159,6 +183,12 @@ class NetJudge:
         platform without weights raises `BackendUnavailable` (a set-up problem, not the clip's)."""
         self.weights_for(platform)
         try:
-            return verdict_of(self.logits(frames, object_px, platform))
+            verdict = verdict_of(self.logits(frames, object_px, platform))
+            if not (verdict.object_ok and verdict.label in RELEASED):
+                return verdict
+            there = persists(frames, object_px)
+            if there is None:
+                return verdict
+            return replace(verdict, object_ok=there, evidence={**verdict.evidence, "object_persists": float(there)})
         except Exception as e:  # noqa: BLE001 - an unreadable clip scores 0; a judge never raises (the contract)
             return Verdict(None, False, False, {"reason": f"{type(e).__name__}: {e}"})
