@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from wsp_eval.backends import BackendSpec, make
+from wsp_eval.backends.judge import score_verdict
 from wsp_eval.judge_data import t5_clips
 from wsp_eval.release_format import ReleaseError, load_release
 
@@ -45,16 +46,18 @@ def build(platform: str, seed: int, out: Path, count: int, workers: int) -> Path
 
 
 def judge_sample(release: Path, platform: str, judge) -> tuple[float, list[dict]]:
-    """The oracle's T5 on one sample and every reference's verdict."""
+    """The oracle's T5 on one sample (T5's score per reference, averaged within primitive, then across) and every
+    reference's verdict."""
     verdicts = []
     for clip in t5_clips(release, f"t5_{platform}", ("reference",)):
         v = judge.judge(clip.judge_frames(), clip.object_px, platform)
+        score = score_verdict(v, clip.primitive)
         verdicts.append({"task": clip.task, "primitive": clip.primitive, "label": v.label, "agent_ok": v.agent_ok,
-                         "object_ok": v.object_ok, "full": v.label == clip.primitive and v.agent_ok and v.object_ok})
-    per: dict[str, list[bool]] = defaultdict(list)
+                         "object_ok": v.object_ok, "full": score == 100.0, "score": score})
+    per: dict[str, list[float]] = defaultdict(list)
     for v in verdicts:
-        per[v["primitive"]].append(v["full"])
-    return 100 * float(np.mean([np.mean(x) for x in per.values()])), verdicts
+        per[v["primitive"]].append(v["score"])
+    return float(np.mean([np.mean(x) for x in per.values()])), verdicts
 
 
 def main() -> None:

@@ -42,15 +42,16 @@ def scene_seed(suite: str, slot: int, attempt: int, build_seed: int = 0) -> int:
     `build_seed`)."""
     if not 0 <= attempt < MAX_ATTEMPTS:
         raise ValueError(f"attempt {attempt} outside [0, {MAX_ATTEMPTS})")
+    private = suite == PRIVATE_RANGE
     index = MAX_ATTEMPTS * slot + attempt
-    if index >= (PRIVATE_PRIME if suite == PRIVATE_RANGE else SEED_SPAN):
+    if index >= (PRIVATE_PRIME if private else SEED_SPAN):
         raise ValueError(f"slot {slot} exceeds the {suite} seed range")
-    if suite == PRIVATE_RANGE:
-        if build_seed == 0:
-            raise ValueError("the private seed range needs a build seed other than 0 (--seed): it keys the scenes")
-        m, c = _private_key(build_seed)
-        return PRIVATE_BASE + (m * index + c) % PRIVATE_PRIME
-    return SEED_BASE[suite] + index
+    if not private:
+        return SEED_BASE[suite] + index
+    if build_seed == 0:
+        raise ValueError("the private seed range needs a build seed other than 0 (--seed): it keys the scenes")
+    m, c = _private_key(build_seed)
+    return PRIVATE_BASE + (m * index + c) % PRIVATE_PRIME
 
 
 def slot_attempt(suite: str, seed: int, build_seed: int = 0) -> tuple[int, int]:

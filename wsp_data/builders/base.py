@@ -47,8 +47,8 @@ class BuildConfig:
             raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
         if self.seed_range and self.seed_range not in (*SEED_BASE, PRIVATE_RANGE):
             raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join((*SEED_BASE, PRIVATE_RANGE))}")
-        if self.seed_range == PRIVATE_RANGE and self.seed == 0:
-            raise ValueError("--seed-range private needs a build seed other than 0 (--seed): it keys the scenes")
+        if self.seed_range == PRIVATE_RANGE:
+            self.scene_seed(0, 0)  # refuses a private range without a key (build seed 0), before anything runs
 
     @property
     def scene_suite(self) -> str:
