@@ -57,6 +57,16 @@ def test_unknown_task_is_a_clear_error(tmp_path):
     assert not (tmp_path / "r").exists()
 
 
+def test_unknown_or_misplaced_primitive_is_a_clear_error(tmp_path):
+    """`--primitives` names what the platform scripts (LIBERO: push, pull, tap, drop), on T5 only; nothing is built."""
+    r = _wsp("build", "--platform", "libero", "--suite", "t5", "--count", "2", "--primitives", "drag",
+             "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "unknown primitive(s) drag" in r.stderr and "push, pull, tap, drop" in r.stderr
+    r = _wsp("build", "--suite", "t4", "--count", "2", "--primitives", "drop", "--out", str(tmp_path / "r"))
+    assert r.returncode == 2 and "the t4 suite has none" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "r").exists()
+
+
 @pytest.mark.parametrize("count", ["0", "-3", "many"])
 def test_bad_count_is_a_clear_error(tmp_path, count):
     r = _wsp("build", "--suite", "t1", "--count", count, "--out", str(tmp_path / "r"))

@@ -158,6 +158,31 @@ def test_plan_balances_primitives_exactly():
         T5Builder(BuildConfig("t5", "maniskill", 8, ("PlaceSphere",)))  # serves drop only
 
 
+def test_primitives_restrict_the_slots():
+    """`--primitives drop` (judge data rich in one primitive): every slot is a drop, over drop's tasks in turn; slot
+    k keeps its scene seed (it depends on the slot, not the primitive); the field is left out of the config JSON
+    when unset, and refused outside T5 or for a primitive the platform does not script."""
+    from wsp_data.builders import BuildConfig
+    from wsp_data.builders.t5 import T5Builder
+    from wsp_data.platforms.maniskill.experts import TASKS
+    from wsp_data.platforms.maniskill.t5 import PRIMITIVE_TASKS
+
+    config = BuildConfig("t5", "maniskill", 8, tuple(TASKS), primitives=("drop",))
+    plans = [T5Builder(config).plan(k) for k in range(8)]
+    assert [p.group for p in plans] == ["drop"] * 8
+    assert [p.task for p in plans] == [PRIMITIVE_TASKS["drop"][k % len(PRIMITIVE_TASKS["drop"])] for k in range(8)]
+    plain = BuildConfig("t5", "maniskill", 8, tuple(TASKS))
+    assert config.scene_seed(5, 0) == plain.scene_seed(5, 0)
+    assert config.to_json()["primitives"] == ["drop"] and "primitives" not in plain.to_json()
+    assert BuildConfig.from_json(config.to_json()) == config and BuildConfig.from_json(plain.to_json()) == plain
+    two = T5Builder(BuildConfig("t5", "maniskill", 4, tuple(TASKS), primitives=("drop", "push")))
+    assert [two.plan(k).group for k in range(4)] == ["push", "drop"] * 2  # the platform's slot order
+    with pytest.raises(ValueError, match="unknown primitive"):
+        T5Builder(BuildConfig("t5", "maniskill", 8, tuple(TASKS), primitives=("wiggle",)))
+    with pytest.raises(ValueError, match="--primitives"):
+        BuildConfig("t4", "maniskill", 8, tuple(TASKS), primitives=("drop",))
+
+
 # -- a tiny real build -------------------------------------------------------------------------------------
 CONFIG = "t5_maniskill"
 # Rules a reference of the key primitive must fail: its object motion is clearly of another kind.

@@ -69,6 +69,9 @@ def parser() -> argparse.ArgumentParser:
                    help="instances to build (default: the paper's count; train: 100 episodes per task)")
     b.add_argument("--out", type=Path, default=Path(DEFAULT_RELEASE_NAME), help="release folder (default: ./worldsimprobe)")
     b.add_argument("--tasks", nargs="+", help="restrict to these tasks (default: all solved benchmark tasks)")
+    b.add_argument("--primitives", nargs="+", default=[], metavar="PRIMITIVE",
+                   help="T5 only: restrict the slots to these scripted primitives (default: all the platform's, "
+                        "balanced); for judge data rich in one primitive")
     b.add_argument("--seed", type=int, default=0,
                    help="build seed (default 0): seeds the proposals' random choices (T1's perturbation, T2's donor, "
                         "T4's intervention); it chooses the scenes only with --seed-range private")
@@ -213,13 +216,20 @@ def cmd_build(args) -> int:
     if unknown:
         listed = "\n  ".join(known)
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
+    if args.primitives and args.suite == "t5":
+        scripted = kit(args.platform).t5_primitives()
+        unknown = [p for p in args.primitives if p not in scripted]
+        if unknown:
+            raise CliError(f"unknown primitive(s) {', '.join(unknown)}; the {args.platform} platform scripts "
+                           f"{', '.join(scripted)}")
     if args.seed and args.seed_range != PRIVATE_RANGE:
         print(f"note: --seed {args.seed} changes the proposals' random choices, not the scenes: slot k, attempt a "
               f"still draws scene seed {SEED_BASE[args.seed_range or args.suite]:,} + 100·k + a; for scenes of this "
               f"seed's own, add --seed-range private", file=sys.stderr)
     try:
         count = args.count or kit(args.platform).default_counts.get(args.suite) or EPISODES_PER_TASK * len(tasks)
-        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range)
+        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range,
+                             tuple(args.primitives))
         result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
                        progress=not args.quiet, executor=args.executor, address=args.address)
     except (BuildError, ValueError) as e:

@@ -33,6 +33,7 @@ class BuildConfig:
     seed: int = 0
     max_attempts: int = 8
     seed_range: str = ""  # scene seeds from this suite's range ("" = the config's own suite); "train" for judge data
+    primitives: tuple[str, ...] = ()  # T5 only: restrict slots to these primitives (() = all the platform's)
 
     def __post_init__(self):
         if self.suite not in SUITES:
@@ -47,6 +48,8 @@ class BuildConfig:
             raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
         if self.seed_range and self.seed_range not in (*SEED_BASE, PRIVATE_RANGE):
             raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join((*SEED_BASE, PRIVATE_RANGE))}")
+        if self.primitives and self.suite != "t5":
+            raise ValueError(f"--primitives restricts T5's scripted primitives; the {self.suite} suite has none")
         if self.seed_range == PRIVATE_RANGE:
             self.scene_seed(0, 0)  # refuses a private range without a key (build seed 0), before anything runs
 
@@ -70,13 +73,15 @@ class BuildConfig:
     def to_json(self) -> dict:
         d = asdict(self)
         d["tasks"] = list(self.tasks)
-        if not d["seed_range"]:
-            del d["seed_range"]  # the default is left out, so configs written before the field read the same
+        d["primitives"] = list(self.primitives)
+        for key in ("seed_range", "primitives"):
+            if not d[key]:
+                del d[key]  # defaults are left out, so configs written before the field read the same
         return d
 
     @classmethod
     def from_json(cls, d: dict) -> BuildConfig:
-        return cls(**{**d, "tasks": tuple(d["tasks"])})
+        return cls(**{**d, "tasks": tuple(d["tasks"]), "primitives": tuple(d.get("primitives", ()))})
 
     def task_of(self, slot: int) -> str:
         return self.tasks[slot % len(self.tasks)]

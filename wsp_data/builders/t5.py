@@ -73,7 +73,12 @@ class T5Builder(SuiteBuilder):
 
     def __init__(self, config: BuildConfig):
         super().__init__(config)
-        self.primitives = self.kit.t5_primitives()
+        scripted = self.kit.t5_primitives()
+        unknown = [p for p in config.primitives if p not in scripted]
+        if unknown:
+            raise ValueError(f"unknown primitive(s) {', '.join(unknown)}; the {config.platform} platform scripts "
+                             f"{', '.join(scripted)}")
+        self.primitives = tuple(p for p in scripted if p in config.primitives) if config.primitives else scripted
         self.primitive_tasks = self.kit.t5_primitive_tasks(config.tasks)
         self.rig = RigCache(self.kit.t5_rig, self.kit.rigs_per_worker)
         self.thresholds = self.kit.t5_rule_thresholds()
