@@ -24,8 +24,8 @@ import pytest
 
 from wsp_eval.backends.judge import score_verdict
 from wsp_eval.backends.errors import BackendUnavailable
-from wsp_eval.backends.judge_net import (CHANNELS, PERSIST_FRAMES, PLATFORM_WEIGHTS, RELEASED, SIDE, NetJudge,
-                                         at_frame_size, judge_input, persists)
+from wsp_eval.backends.judge_net import (CHANNELS, OBJECT_WEIGHTS, PERSIST_FRAMES, PLATFORM_WEIGHTS, RELEASED, SIDE,
+                                         NetJudge, at_frame_size, judge_input, persists)
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -59,7 +59,8 @@ def test_the_packaged_weights_and_their_training_record(platform):
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("8 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("9 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert ", maniskill drop " in judge.version  # the object verifier's digest too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
     custom = NetJudge(PLATFORM_WEIGHTS["aloha"])  # --judge-checkpoint: these weights judge every platform
@@ -123,6 +124,30 @@ def test_references_score_100_and_negatives_are_rejected(judge, clips):
     frozen = [(c, v) for c, v in by_kind["frozen"] if c.object is False and c.platform in FROZEN_TRAINED]
     assert frozen and all(score_verdict(v, c.primitive) == 0.0 for c, v in frozen), \
         [(c.instance_id, c.primitive, v) for c, v in frozen if score_verdict(v, c.primitive)]
+
+
+def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, suites_release, libero_release):
+    """Version 9: where the network says `drop` on a ManiSkill clip, `object_ok` is decided by the mean of its object
+    logit and the drop verifier's (trained on training-range drops, `--object-of drop`; its record says so), then
+    version 8's persistence rule. On the tiny release's drop: the reference scores 100 and its frozen clip (the
+    object held still) 0, with both probabilities in the evidence. LIBERO has no verifier: its drops are the
+    network's alone."""
+    weights = OBJECT_WEIGHTS[("maniskill", "drop")]
+    record = json.loads(weights.with_suffix(".json").read_text())
+    assert weights.stat().st_size < 20e6 and record["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
+    assert record["object_of"] == "drop" and all(d["seed_range"] == ["train"] for d in record["data"])
+    drops = [c for c in t5_clips(suites_release, "t5_maniskill", ("reference", "frozen")) if c.primitive == "drop"]
+    ref = next(c for c in drops if c.kind == "reference")
+    v = judge.judge(ref.judge_frames(), ref.object_px, "maniskill")
+    assert score_verdict(v, "drop") == 100.0, v
+    z = [np.log(v.evidence[k] / (1 - v.evidence[k])) for k in ("p_object", "p_object_verifier")]
+    assert v.evidence["p_object_mean"] == pytest.approx(1 / (1 + np.exp(-np.mean(z))), abs=1e-6)
+    frozen = [c for c in drops if c.kind == "frozen" and c.object is False]
+    assert frozen and all(score_verdict(judge.judge(c.judge_frames(), c.object_px, "maniskill"), "drop") == 0.0
+                          for c in frozen)
+    lb = next(c for c in t5_clips(libero_release, "t5_libero", ("reference",)) if c.primitive == "drop")
+    assert "p_object_verifier" not in judge.judge(lb.judge_frames(), lb.object_px, "libero").evidence
+    assert NetJudge(PLATFORM_WEIGHTS["maniskill"]).verifier_for("maniskill", "drop") is None  # given weights: alone
 
 
 def test_persists_follows_the_object_to_the_end_of_the_clip():

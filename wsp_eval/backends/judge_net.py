@@ -23,6 +23,12 @@ still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an 
 erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
 which may hide it, so the network decides those alone.
 
+Since version 9, an object verifier (`OBJECT_WEIGHTS`; ManiSkill's drop alone) joins the network for one label on
+one platform: where the network names that label, `object_ok` is decided by the mean of the network's object logit
+and the verifier's (a network of the same architecture and input, whose object output alone was trained, on that
+primitive's training-range clips and T4 references: `scripts/train_judge.py --object-of`), before `persists`.
+ManiSkill's drops were the one primitive the network credited too rarely (81 % of fresh references).
+
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 7), ALOHA's own
@@ -42,11 +48,12 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "8"
+NAME, VERSION = "net", "9"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v7_libero.onnx",
                     "aloha": WEIGHTS_DIR / "judge_net_v6_aloha.onnx"}
+OBJECT_WEIGHTS = {("maniskill", "drop"): WEIGHTS_DIR / "judge_net_v9_maniskill_drop.onnx"}  # object verifiers
 FRAME, SIDE = 128, 64
 VIEWS = 3
 CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
@@ -127,11 +134,32 @@ def persists(frames: np.ndarray, object_px: tuple[float, float]) -> bool | None:
     return bool(region_tracks(video.rgb, query_grid(px), model).visible[-PERSIST_FRAMES:].any())
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=8)
 def _net(path: str):
     import cv2
 
     return cv2.dnn.readNetFromONNX(path)
+
+
+def _inputs(frames: np.ndarray, object_px: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The network inputs of a clip and of its left–right mirror (every primitive is mirror-symmetric; pixel centres
+    at integers in the 256² frame, so the mirror of x is 255 − x)."""
+    import cv2
+
+    cv2.setNumThreads(1)
+    frames = np.asarray(frames)
+    flipped = np.stack([cv2.flip(np.ascontiguousarray(f), 1) for f in frames])  # frames[:, :, ::-1], copied faster
+    return judge_input(frames, object_px), judge_input(flipped, (255.0 - float(object_px[0]), float(object_px[1])))
+
+
+def _run(weights: Path, inputs: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The mean of a network's outputs over `inputs`."""
+    net = _net(str(weights))
+    out = []
+    for x in inputs:
+        net.setInput(x)
+        out.append(np.asarray(net.forward()).reshape(-1))
+    return np.mean(out, axis=0)
 
 
 class NetJudge:
@@ -141,7 +169,8 @@ class NetJudge:
 
     def __init__(self, weights: Path | str | None = None):
         self.weights = Path(weights) if weights else None  # given: these weights judge every platform
-        files = [self.weights] if self.weights else list(dict.fromkeys(PLATFORM_WEIGHTS.values()))
+        files = [self.weights] if self.weights else list(dict.fromkeys([*PLATFORM_WEIGHTS.values(),
+                                                                          *OBJECT_WEIGHTS.values()]))
         for path in files:
             if not path.is_file():
                 raise BackendUnavailable(f"judge backend 'net': weights not found at {path}; reinstall the package, "
@@ -149,8 +178,10 @@ class NetJudge:
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
         if self.weights:
             self.version = f"{VERSION} ({digests[self.weights]})"
-        else:  # in PLATFORM_WEIGHTS order, e.g. "3 (maniskill+libero 9b07580c2e2e, aloha 0123456789ab)"
-            named = ("+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {d}" for path, d in digests.items())
+        else:  # e.g. "9 (maniskill f7acdb185864, libero 6834087686ab, aloha 50e4ca58fa78, maniskill drop 0123456789ab)"
+            named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
+                     for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
+            named += [f"{platform} {label} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]
             self.version = f"{VERSION} ({', '.join(named)})"
 
     def weights_for(self, platform: str | None) -> Path:
@@ -165,25 +196,28 @@ class NetJudge:
         return PLATFORM_WEIGHTS[platform]
 
     def logits(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> np.ndarray:
-        import cv2
+        """The network's 10 outputs for a clip: the mean over the clip and its left–right mirror."""
+        return _run(self.weights_for(platform), _inputs(frames, object_px))
 
-        cv2.setNumThreads(1)
-        net = _net(str(self.weights_for(platform)))
-        frames = np.asarray(frames)
-        flipped = np.stack([cv2.flip(np.ascontiguousarray(f), 1) for f in frames])  # frames[:, :, ::-1], copied faster
-        mirrored = (flipped, (255.0 - float(object_px[0]), float(object_px[1])))  # pixel centres at integers
-        out = []
-        for f, px in ((frames, object_px), mirrored):
-            net.setInput(judge_input(f, px))
-            out.append(np.asarray(net.forward()).reshape(-1))
-        return np.mean(out, axis=0)
+    def verifier_for(self, platform: str | None, label: str | None) -> Path | None:
+        """The object verifier that decides `object_ok` for this platform and label (`OBJECT_WEIGHTS`), if any;
+        none when the given `weights` judge every platform."""
+        return None if self.weights else OBJECT_WEIGHTS.get((platform, label))
 
     def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
         """One clip's verdict. An unreadable clip gets label None (scores 0; a judge never raises on a clip); a
         platform without weights raises `BackendUnavailable` (a set-up problem, not the clip's)."""
         self.weights_for(platform)
         try:
-            verdict = verdict_of(self.logits(frames, object_px, platform))
+            inputs = _inputs(frames, object_px)
+            logits = _run(self.weights_for(platform), inputs)
+            verdict = verdict_of(logits)
+            verifier = self.verifier_for(platform, verdict.label)
+            if verifier is not None:  # its object logit joins the network's: their mean decides
+                z = float(_run(verifier, inputs)[-1])
+                p = float(1.0 / (1.0 + np.exp(-(z + float(logits[-1])) / 2)))
+                verdict = replace(verdict, object_ok=p >= 0.5, evidence={
+                    **verdict.evidence, "p_object_verifier": float(1.0 / (1.0 + np.exp(-z))), "p_object_mean": p})
             if not (verdict.object_ok and verdict.label in RELEASED):
                 return verdict
             there = persists(frames, object_px)
