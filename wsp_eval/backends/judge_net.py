@@ -207,10 +207,10 @@ class NetJudge:
     def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
         """One clip's verdict. An unreadable clip gets label None (scores 0; a judge never raises on a clip); a
         platform without weights raises `BackendUnavailable` (a set-up problem, not the clip's)."""
-        self.weights_for(platform)
+        weights = self.weights_for(platform)
         try:
             inputs = _inputs(frames, object_px)
-            logits = _run(self.weights_for(platform), inputs)
+            logits = _run(weights, inputs)
             verdict = verdict_of(logits)
             verifier = self.verifier_for(platform, verdict.label)
             if verifier is not None:  # its object logit joins the network's: their mean decides
