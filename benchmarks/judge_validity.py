@@ -115,8 +115,9 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
     lines = [f"### {judge_name} on {platform}", "", "| primitive | n | label agrees | scores 100 |", "|---|---:|---:|---:|"]
     for p, v in s["per_primitive"].items():
         lines.append(f"| {p} | {v['n']} | {v['agree']} | {v['full']} |")
+    oracle = "–" if s["t5_score"] is None else f"{s['t5_score'] * 100:.1f}"  # a release of T4 configs only: none
     lines.append(f"| **all** | {sum(v['n'] for v in s['per_primitive'].values())} | {100 * s['agreement']:.1f} % | "
-                 f"{100 * s['full']:.1f} % (T5 score of the oracle: {s['t5_score'] * 100:.1f}) |")
+                 f"{100 * s['full']:.1f} % (T5 score of the oracle: {oracle}) |")
     labels = [p for p in PRIMITIVES if p in s["confusion"]]
     cols = labels + sorted({k for row in s["confusion"].values() for k in row} - set(labels))
     lines += ["", "Confusion (rows: intended; columns: the judge's label)", "",
