@@ -216,12 +216,6 @@ def cmd_build(args) -> int:
     if unknown:
         listed = "\n  ".join(known)
         raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
-    if args.primitives and args.suite == "t5":
-        scripted = kit(args.platform).t5_primitives()
-        unknown = [p for p in args.primitives if p not in scripted]
-        if unknown:
-            raise CliError(f"unknown primitive(s) {', '.join(unknown)}; the {args.platform} platform scripts "
-                           f"{', '.join(scripted)}")
     if args.seed and args.seed_range != PRIVATE_RANGE:
         print(f"note: --seed {args.seed} changes the proposals' random choices, not the scenes: slot k, attempt a "
               f"still draws scene seed {SEED_BASE[args.seed_range or args.suite]:,} + 100·k + a; for scenes of this "

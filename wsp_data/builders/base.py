@@ -48,10 +48,22 @@ class BuildConfig:
             raise ValueError(f"max_attempts must be in [1, {MAX_ATTEMPTS}], got {self.max_attempts}")
         if self.seed_range and self.seed_range not in (*SEED_BASE, PRIVATE_RANGE):
             raise ValueError(f"unknown seed range {self.seed_range!r}; known: {', '.join((*SEED_BASE, PRIVATE_RANGE))}")
-        if self.primitives and self.suite != "t5":
-            raise ValueError(f"--primitives restricts T5's scripted primitives; the {self.suite} suite has none")
+        if self.primitives:
+            self._check_primitives()
         if self.seed_range == PRIVATE_RANGE:
             self.scene_seed(0, 0)  # refuses a private range without a key (build seed 0), before anything runs
+
+    def _check_primitives(self) -> None:
+        """`primitives` must name T5 primitives the platform scripts (a platform without T5 is refused by the builder)."""
+        if self.suite != "t5":
+            raise ValueError(f"--primitives restricts T5's scripted primitives; the {self.suite} suite has none")
+        platform = kit(self.platform)
+        if platform.unsupported("t5") is None:
+            scripted = platform.t5_primitives()
+            unknown = [p for p in self.primitives if p not in scripted]
+            if unknown:
+                raise ValueError(f"unknown primitive(s) {', '.join(unknown)}; the {self.platform} platform scripts "
+                                 f"{', '.join(scripted)}")
 
     @property
     def scene_suite(self) -> str:

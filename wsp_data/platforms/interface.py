@@ -321,7 +321,7 @@ class PlatformKit(ABC):
         order; T5 balances slots over exactly these.
 
         Called:
-            once, by `T5Builder.__init__`.
+            once, by `T5Builder.__init__`; and by `BuildConfig` when a build names `--primitives`, to check them.
         """
         raise NotSupported(self.unsupported("t5"))
 
