@@ -232,11 +232,11 @@ def main() -> None:
     ap.add_argument("--expert", action="store_true",
                     help="also train on the task experts' own primitives (T5 source rollouts of the tasks in "
                          "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); ManiSkill's version 5")
-    ap.add_argument("--object-of", metavar="PRIMITIVE", choices=PRIMITIVES,
-                    help="train an object verifier for one primitive (judge_net.OBJECT_WEIGHTS): only the object "
-                         "output, on that primitive's T5 clips (references true; static, approach, frozen, erased "
-                         "false) and every T4 reference (false); references repeated to weigh as much as the "
-                         "negatives (docs/judge.md, version 9)")
+    ap.add_argument("--object-of", metavar="PRIMITIVE", nargs="+", choices=PRIMITIVES,
+                    help="train an object verifier for these primitives (judge_net.OBJECT_WEIGHTS): only the object "
+                         "output, on their T5 clips (references true; static, approach, frozen, erased false) and "
+                         "every T4 reference (false); references repeated to weigh as much as the negatives "
+                         "(docs/judge.md, versions 9 and 10)")
     ap.add_argument("--erased", nargs="?", const="all", choices=("all", "clear"),
                     help="also train on clips where the robot acts and the object fades out where it stood (kind "
                          "`erased`, object false): what world models often draw. `clear`: a negative only where its "
@@ -256,19 +256,21 @@ def main() -> None:
         sys.exit("no t5 configs found in " + ", ".join(map(str, args.releases)))
     repeat = 1
     if args.object_of:
-        clips = [c for c in clips if (c.kind == "t4" or c.primitive == args.object_of) and c.object is not None]
-        for c in clips:
-            c.label, c.agent = None, None  # the object output alone is trained
+        clips = [c for c in clips if (c.kind == "t4" or c.primitive in args.object_of) and c.object is not None]
         positives = sum(c.object is True for c in clips)
         negatives = sum((T4_REPEAT if c.kind == "t4" else 1) for c in clips if c.object is False)
         if not positives:
-            sys.exit(f"no {args.object_of} references in " + ", ".join(map(str, args.releases)))
+            sys.exit(f"no {' or '.join(args.object_of)} references in " + ", ".join(map(str, args.releases)))
         repeat = max(1, round(negatives / positives))
     held: list[Clip] = []
     if args.holdout:
         out_of = {c.instance_id for c in clips if int(c.instance_id.rsplit("/", 1)[1]) // 8 % args.holdout == 0}
         held = [c for c in clips if c.instance_id in out_of]
         clips = [c for c in clips if c.instance_id not in out_of]
+    references = {p: sum(c.label == p for c in clips) for p in PRIMITIVES}
+    if args.object_of:
+        for c in clips + held:
+            c.label, c.agent = None, None  # the object output alone is trained
     model = JudgeNet()
     opt = torch.optim.AdamW(model.parameters(), lr=LR, weight_decay=WEIGHT_DECAY)
     pool = clips + [c for c in clips if c.kind == "t4"] * (T4_REPEAT - 1) + \
@@ -300,7 +302,7 @@ def main() -> None:
         "weights": args.out.name, "sha256": hashlib.sha256(args.out.read_bytes()).hexdigest(),
         "data": [data_record(r) for r in args.releases],
         "clips": {k: sum(c.kind == k for c in clips) for k in sorted({c.kind for c in clips})},
-        "references_per_primitive": {p: sum(c.label == p for c in clips) for p in PRIMITIVES},
+        "references_per_primitive": references,
         "excluded_tasks": args.exclude_tasks, "expert": args.expert, "erased": args.erased, "object_of": args.object_of,
         "object_targets": {"true": sum(c.object is True for c in clips), "false": sum(c.object is False for c in clips)},
         "reference_repeat": repeat, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,

@@ -255,3 +255,17 @@ def test_scoring_with_the_net_judge_needs_no_torch(tmp_path):
             "assert 'torch' not in sys.modules and 'onnx' not in sys.modules, sorted(sys.modules); print(v.label)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
+
+
+def test_training_refuses_clips_of_test_range_seeds(tmp_path, libero_release):
+    """The judge and its verifiers train on `--seed-range train` builds only (what makes every measurement on
+    test-range and private-range seeds fresh): `train_judge.py` on the tiny release (test-range seeds) stops before
+    training, naming the config and the fix, and writes no weights."""
+    import subprocess
+
+    pytest.importorskip("torch")
+    out = tmp_path / "verifier.onnx"
+    run = subprocess.run([sys.executable, str(Path(ENSEMBLE).with_name("train_judge.py")), str(libero_release),
+                          "--object-of", "tap", "pull", "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert run.returncode != 0 and not out.exists()
+    assert "t4_libero: built on the t4 seed range" in run.stderr and "--seed-range train" in run.stderr, run.stderr
