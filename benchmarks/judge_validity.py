@@ -65,6 +65,8 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
                                       "intended": c.primitive, "expected": c.label, "expected_object": c.object,
                                       "clear": c.clear, "label": v.label,
                                       "agent_ok": v.agent_ok, "object_ok": v.object_ok,
+                                      "evidence": {k: round(float(x), 4) for k, x in v.evidence.items()
+                                                   if isinstance(x, (int, float))},
                                       "seconds": time.perf_counter() - t})
     return out
 
