@@ -236,7 +236,7 @@ def main() -> None:
                     help="train an object verifier for these primitives (judge_net.OBJECT_WEIGHTS): only the object "
                          "output, on their T5 clips (references true; static, approach, frozen, erased false) and "
                          "every T4 reference (false); references repeated to weigh as much as the negatives "
-                         "(docs/judge.md, versions 9 and 10)")
+                         "(docs/judge.md: version 9, and the LIBERO tap/pull verifier tried)")
     ap.add_argument("--erased", nargs="?", const="all", choices=("all", "clear"),
                     help="also train on clips where the robot acts and the object fades out where it stood (kind "
                          "`erased`, object false): what world models often draw. `clear`: a negative only where its "
