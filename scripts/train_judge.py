@@ -1,10 +1,16 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 7), from a fresh clone:
+    # LIBERO's weights (version 10: two networks averaged), from a fresh clone:
     wsp build --platform libero --suite t5 --seed-range train --count 96 --workers 2 --out judge-train-lb
     wsp build --platform libero --suite t4 --seed-range train --count 24 --workers 2 --out judge-train-lb
-    .venv/bin/python scripts/train_judge.py judge-train-lb --out wsp_eval/backends/weights/judge_net_v7_libero.onnx
+    .venv/bin/python scripts/train_judge.py judge-train-lb --out judge_net_v7_libero.onnx
+    wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
+    wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
+    wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4
+    .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 --out lb_v10.onnx
+    .venv/bin/python scripts/ensemble_judge.py judge_net_v7_libero.onnx lb_v10.onnx \
+        --out wsp_eval/backends/weights/judge_net_v10_libero.onnx
 
     # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
     # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)

@@ -59,7 +59,7 @@ def test_the_packaged_weights_and_their_training_record(platform):
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("9 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("10 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     assert ", maniskill drop " in judge.version  # the object verifier's digest too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
@@ -69,10 +69,11 @@ def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refuse
 
 def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     """`scripts/ensemble_judge.py` (how ManiSkill's version 5 was made): one ONNX file whose logits are the mean of
-    its members' (here the LIBERO and ALOHA weights), with a record naming both; float32 sums, so to 1e-5."""
+    its members' (here ALOHA's weights and ManiSkill's drop verifier, two single networks), with a record naming
+    both; float32 sums, so to 1e-5."""
     import subprocess
 
-    members = [PLATFORM_WEIGHTS["libero"], PLATFORM_WEIGHTS["aloha"]]
+    members = [PLATFORM_WEIGHTS["aloha"], OBJECT_WEIGHTS[("maniskill", "drop")]]
     out = tmp_path / "ensemble.onnx"
     run = subprocess.run([sys.executable, ENSEMBLE, *map(str, members), "--out", str(out)],
                          capture_output=True, text=True, timeout=120)
