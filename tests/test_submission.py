@@ -96,3 +96,19 @@ def test_bad_manifest(tmp_path, t1_release):
     (tmp_path / "submission.json").write_text('{"model": "m", "seeds": [0, 0], "benchmark_version": 1}')
     text = "\n".join(str(p) for p in validate(tmp_path, t1_release))
     assert "'benchmark_version' missing or not a str" in text and "distinct non-negative integers" in text
+
+
+def test_a_partially_downloaded_release_is_named_not_a_traceback(oracle, t1_release, tmp_path):
+    """A release folder whose release.json lists a config that was not downloaded (users often fetch one config of
+    the hub repo): validate and score name the missing file and how to proceed, and score writes no report."""
+    partial = tmp_path / "partial"
+    partial.mkdir()
+    (partial / "release.json").write_text((t1_release / "release.json").read_text())  # t1_maniskill's folder absent
+    missing = partial / "t1_maniskill" / "instances.parquet"
+    assert [p.path for p in validate(oracle, partial)] == [str(missing)]
+    for verb in (["validate"], ["score", "--out", str(tmp_path / "report"), "--quiet"]):
+        r = subprocess.run([sys.executable, "-m", "wsp_data.cli", *verb[:1], str(oracle), "--release", str(partial),
+                            *verb[1:]], capture_output=True, text=True, timeout=300)
+        assert r.returncode != 0 and "Traceback" not in r.stderr, r.stderr
+        assert str(missing) in r.stdout + r.stderr and "partial download" in r.stdout + r.stderr
+    assert not (tmp_path / "report" / "report.json").exists()

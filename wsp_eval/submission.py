@@ -36,9 +36,12 @@ RESAMPLED = ("export at the reference's resolution (a resampled oracle loses up 
              "docs/validity.md §5), or score it anyway with `wsp score --accept-lossy`")
 
 
+PARTIAL_RELEASE = "not found"  # a Problem about the release folder, not the submission: nothing can be scored
+
+
 @dataclass(frozen=True)
 class Problem:
-    path: str  # relative to the submission folder
+    path: str  # relative to the submission folder (a release file: its full path)
     message: str
 
     def __str__(self) -> str:
@@ -196,7 +199,13 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
     problems += _links(sub)
     if meta is None:
         return problems
-    expected = {e.relpath: e for e in expected_videos(release, meta.get("configs", release_configs), meta["seeds"])}
+    configs = meta.get("configs", release_configs)
+    absent = [c for c in configs if not (Path(release) / c / INSTANCES).is_file()]
+    if absent:  # a partial download of the release: nothing to check the submission against for these configs
+        return problems + [Problem(str(Path(release) / c / INSTANCES), f"{PARTIAL_RELEASE}: the release's "
+                                   f"{RELEASE_JSON} lists {c} (a partial download?); fetch that config, or name only "
+                                   f"the configs you score in {SUBMISSION_JSON}'s \"configs\"") for c in absent]
+    expected = {e.relpath: e for e in expected_videos(release, configs, meta["seeds"])}
     present = {_shown(p, sub) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
     present.discard(SUBMISSION_JSON)
     for rel in sorted(set(expected) - present):
