@@ -32,8 +32,8 @@ ManiSkill's drops were the one primitive the network credited too rarely (81 % o
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 10: version 7's network
-averaged with one trained on more taps, pulls, pushes and drops, likewise), ALOHA's own (version 6). All three trained on frozen-object clips too (the robot acting, the object still:
-`wsp_eval.judge_data`). A platform without weights is refused with a message.
+averaged with one trained on more taps, pulls, pushes and drops, likewise), ALOHA's own (version 6). All three
+trained on frozen-object clips too (the robot acting, the object still: `wsp_eval.judge_data`). A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
