@@ -36,7 +36,7 @@ RESAMPLED = ("export at the reference's resolution (a resampled oracle loses up 
              "docs/validity.md §5), or score it anyway with `wsp score --accept-lossy`")
 
 
-PARTIAL_RELEASE = "not found"  # a Problem about the release folder, not the submission: nothing can be scored
+PARTIAL_RELEASE = "not in the release folder"  # a Problem of the release, not the submission: nothing is scored
 
 
 @dataclass(frozen=True)
@@ -202,7 +202,7 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
     configs = meta.get("configs", release_configs)
     absent = [c for c in configs if not (Path(release) / c / INSTANCES).is_file()]
     if absent:  # a partial download of the release: nothing to check the submission against for these configs
-        return problems + [Problem(str(Path(release) / c / INSTANCES), f"{PARTIAL_RELEASE}: the release's "
+        return problems + [Problem(str(Path(release) / c / INSTANCES), f"{PARTIAL_RELEASE}, though its "
                                    f"{RELEASE_JSON} lists {c} (a partial download?); fetch that config, or name only "
                                    f"the configs you score in {SUBMISSION_JSON}'s \"configs\"") for c in absent]
     expected = {e.relpath: e for e in expected_videos(release, configs, meta["seeds"])}

@@ -33,7 +33,8 @@ Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained o
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 10: version 7's network
 averaged with one trained on more taps, pulls, pushes and drops, likewise), ALOHA's own (version 6). All three
-trained on frozen-object clips too (the robot acting, the object still: `wsp_eval.judge_data`). A platform without weights is refused with a message.
+trained on frozen-object clips too (the robot acting, the object still: `wsp_eval.judge_data`). A platform without
+weights is refused with a message.
 """
 
 from __future__ import annotations
@@ -178,7 +179,7 @@ class NetJudge:
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
         if self.weights:
             self.version = f"{VERSION} ({digests[self.weights]})"
-        else:  # e.g. "10 (maniskill f7acdb185864, libero 44c67f09a53a, aloha 50e4ca58fa78, maniskill drop 0123456789ab)"
+        else:  # "10 (maniskill f7acdb185864, libero 44c67f09a53a, aloha 50e4ca58fa78, maniskill drop 47902442f13d)"
             named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
                      for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
             named += [f"{platform} {label} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]
