@@ -56,10 +56,10 @@ def test_the_packaged_weights_and_their_training_record(platform):
     assert platform in trained_on  # each platform's weights saw that platform's clips
 
 
-UNCOVERED = pytest.mark.xfail(strict=True, reason="version 10's LIBERO weights never saw pulls on 8 tasks and drops "
-                              "on 11 (libero_90's living-room scenes, two kitchen scenes): docs/validity.md §1, "
-                              "'After version 10'. Strict: weights that cover them make this fail until the mark "
-                              "is removed")
+UNCOVERED = pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+    "version 10's LIBERO weights never saw pulls on 8 tasks and drops on 11 (libero_90's living-room scenes, two "
+    "kitchen scenes): docs/validity.md §1, 'After version 10'. Strict: weights that cover them make this fail "
+    "until the mark is removed"))
 
 
 @pytest.mark.parametrize("platform", [pytest.param(p, marks=UNCOVERED) if p == "libero" else p
