@@ -47,8 +47,7 @@ from wsp_eval.flow_cache import cache_dir
 from wsp_eval.reference import reference_size
 from wsp_eval.reference_cache import results_folder
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release, split_config
-from wsp_eval.submission import (PARTIAL_RELEASE, SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs,
-                                 validate)
+from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
@@ -242,8 +241,7 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
     if not submission.is_dir():
         raise ScoreError(f"{submission}: submission folder not found")
     problems = validate(submission, release, check_videos=False)
-    fatal = [p for p in problems
-             if p.path == SUBMISSION_JSON or p.message.startswith(("is a link", PARTIAL_RELEASE))]
+    fatal = [p for p in problems if p.path == SUBMISSION_JSON or p.fatal]
     missing = [p for p in problems if p not in fatal and p.message == "missing"]
     if fatal:
         raise ScoreError("the submission is not scorable:\n  " + "\n  ".join(map(str, fatal)))

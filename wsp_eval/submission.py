@@ -36,13 +36,11 @@ RESAMPLED = ("export at the reference's resolution (a resampled oracle loses up 
              "docs/validity.md §5), or score it anyway with `wsp score --accept-lossy`")
 
 
-PARTIAL_RELEASE = "not in the release folder"  # a Problem of the release, not the submission: nothing is scored
-
-
 @dataclass(frozen=True)
 class Problem:
     path: str  # relative to the submission folder (a release file: its full path)
     message: str
+    fatal: bool = False  # nothing can be scored (a link in the submission, a config missing from the release)
 
     def __str__(self) -> str:
         return f"{self.path}: {self.message}"
@@ -131,7 +129,7 @@ def _links(sub: Path) -> list[Problem]:
         if p.is_symlink():
             target = p.resolve()
             where = "outside the submission" if root not in target.parents and target != root else "inside it"
-            problems.append(Problem(_shown(p, sub), f"is a link ({where}: {target}); submit plain files"))
+            problems.append(Problem(_shown(p, sub), f"is a link ({where}: {target}); submit plain files", fatal=True))
     return problems
 
 
@@ -202,9 +200,10 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
     configs = meta.get("configs", release_configs)
     absent = [c for c in configs if not (Path(release) / c / INSTANCES).is_file()]
     if absent:  # a partial download of the release: nothing to check the submission against for these configs
-        return problems + [Problem(str(Path(release) / c / INSTANCES), f"{PARTIAL_RELEASE}, though its "
+        return problems + [Problem(str(Path(release) / c / INSTANCES), f"not in the release folder, though its "
                                    f"{RELEASE_JSON} lists {c} (a partial download?); fetch that config, or name only "
-                                   f"the configs you score in {SUBMISSION_JSON}'s \"configs\"") for c in absent]
+                                   f"the configs you score in {SUBMISSION_JSON}'s \"configs\"", fatal=True)
+                           for c in absent]
     expected = {e.relpath: e for e in expected_videos(release, configs, meta["seeds"])}
     present = {_shown(p, sub) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
     present.discard(SUBMISSION_JSON)
