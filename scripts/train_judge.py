@@ -1,16 +1,16 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 10: two networks averaged), from a fresh clone:
-    wsp build --platform libero --suite t5 --seed-range train --count 96 --workers 2 --out judge-train-lb
-    wsp build --platform libero --suite t4 --seed-range train --count 24 --workers 2 --out judge-train-lb
-    .venv/bin/python scripts/train_judge.py judge-train-lb --out judge_net_v7_libero.onnx
+    # LIBERO's weights (version 11: three networks averaged), from a fresh clone ($TASKS: docs/validity.md §1):
     wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
     wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
     wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4
-    .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 --out lb_v10.onnx
-    .venv/bin/python scripts/ensemble_judge.py judge_net_v7_libero.onnx lb_v10.onnx \
-        --out wsp_eval/backends/weights/judge_net_v10_libero.onnx
+    wsp build --platform libero --suite t5 --seed-range train --tasks $TASKS --primitives pull drop --count 40 \
+        --workers 2 --out train-u
+    for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u --seed $s \
+        --out lb_v11_s$s.onnx; done
+    .venv/bin/python scripts/ensemble_judge.py lb_v11_s0.onnx lb_v11_s1.onnx lb_v11_s2.onnx \
+        --out wsp_eval/backends/weights/judge_net_v11_libero.onnx
 
     # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
     # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)
@@ -248,8 +248,11 @@ def main() -> None:
                          "`erased`, object false): what world models often draw. `clear`: a negative only where its "
                          "reference shows the object visibly away from where it stood (`Clip.clear`), else no "
                          "object target (docs/judge.md, version 7)")
+    ap.add_argument("--seed", type=int, default=SEED,
+                    help="the initialisation, shuffling and augmentation seed; two networks trained on the same data with "
+                         "other seeds make an ensemble (LIBERO's version 11: seeds 0, 1 and 2)")
     args = ap.parse_args()
-    torch.manual_seed(SEED)
+    torch.manual_seed(args.seed)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)
     cv2.setNumThreads(1)
@@ -283,7 +286,7 @@ def main() -> None:
         [c for c in clips if c.kind == "reference"] * (repeat - 1)
     steps = args.epochs * ((len(pool) + BATCH - 1) // BATCH)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=LR, total_steps=steps)
-    rng = np.random.default_rng(SEED)
+    rng = np.random.default_rng(args.seed)
     history, start = [], time.perf_counter()
     for epoch in range(args.epochs):
         model.train()
@@ -312,7 +315,7 @@ def main() -> None:
         "excluded_tasks": args.exclude_tasks, "expert": args.expert, "erased": args.erased, "object_of": args.object_of,
         "object_targets": {"true": sum(c.object is True for c in clips), "false": sum(c.object is False for c in clips)},
         "reference_repeat": repeat, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
-        "weight_decay": WEIGHT_DECAY, "seed": SEED,
+        "weight_decay": WEIGHT_DECAY, "seed": args.seed,
         "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
         "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),
         "torch": torch.__version__, "opencv": cv2.__version__,
