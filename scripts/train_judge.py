@@ -249,8 +249,8 @@ def main() -> None:
                          "reference shows the object visibly away from where it stood (`Clip.clear`), else no "
                          "object target (docs/judge.md, version 7)")
     ap.add_argument("--seed", type=int, default=SEED,
-                    help="the initialisation, shuffling and augmentation seed; two networks trained on the same data with "
-                         "other seeds make an ensemble (LIBERO's version 11: seeds 0, 1 and 2)")
+                    help="the initialisation, shuffling and augmentation seed; networks trained on the same data "
+                         "with other seeds make an ensemble (LIBERO's version 11: seeds 0, 1 and 2)")
     args = ap.parse_args()
     torch.manual_seed(args.seed)
     torch.set_num_threads(1)

@@ -32,9 +32,9 @@ ManiSkill's drops were the one primitive the network credited too rarely (81 % o
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
 networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 11: three networks averaged,
-likewise, trained on the same clips with three seeds, every (task, primitive) pair T5 builds among them), ALOHA's own (version 6). All three
-trained on frozen-object clips too (the robot acting, the object still: `wsp_eval.judge_data`). A platform without
-weights is refused with a message.
+likewise, trained with three seeds on the same clips, which hold every (task, primitive) pair T5 builds), ALOHA's
+own (version 6). All three trained on frozen-object clips too (the robot acting, the object still:
+`wsp_eval.judge_data`). A platform without weights is refused with a message.
 """
 
 from __future__ import annotations
