@@ -18,43 +18,72 @@ from pathlib import Path
 import cv2
 import numpy as np
 import onnx
-from onnx import helper
+from onnx import helper, numpy_helper
 
 from wsp_eval.backends.judge_net import CHANNELS, SIDE
 
 
+def _layers(path: Path, model: onnx.ModelProto) -> tuple[list[onnx.NodeProto], onnx.NodeProto, dict]:
+    """A trained judge network's convolutions (each followed by ReLU, the first on `clip`) and its linear head,
+    checked against the shape `scripts/train_judge.py` exports; and its weights by name."""
+    g = model.graph
+    if [x.name for x in g.input] != ["clip"] or [x.name for x in g.output] != ["logits"]:
+        raise SystemExit(f"{path}: not a judge network (input 'clip', output 'logits')")
+    ops = [n.op_type for n in g.node]
+    k = len(ops) - 3
+    grouped = any(_attributes(n).get("group", 1) != 1 for n in g.node if n.op_type == "Conv")  # an ensemble made here
+    if (grouped or k < 2 or ops[:k] != ["Conv", "Relu"] * (k // 2)
+            or ops[k:] != ["GlobalAveragePool", "Flatten", "Gemm"]):
+        raise SystemExit(f"{path}: not one network as scripts/train_judge.py exports it (Conv, ReLU, …, pool, "
+                         f"linear, ungrouped); got {', '.join(dict.fromkeys(ops))}. Give the single trained networks, not an "
+                         "ensemble")
+    return [n for n in g.node if n.op_type == "Conv"], g.node[-1], {t.name: numpy_helper.to_array(t)
+                                                                    for t in g.initializer}
+
+
+def _attributes(node: onnx.NodeProto) -> dict:
+    return {a.name: helper.get_attribute_value(a) for a in node.attribute}
+
+
 def merged(paths: list[Path]) -> onnx.ModelProto:
-    """One graph: every member's nodes and weights (names prefixed m0_, m1_, …) on the shared input `clip`,
-    their `logits` summed and scaled by 1/n into the output `logits`."""
+    """One network computing the mean of the members' logits, the members side by side: the first convolution's
+    filters stacked (one convolution reads the clip once for all of them), the later ones grouped (member i's
+    filters see only member i's channels), the linear heads joined into one that averages. The same arithmetic
+    as running each member and averaging, up to float32 summation order, and ≈ 13 % less CPU time than running
+    them one after another (docs/measurements.md)."""
     models = [onnx.load(str(p)) for p in paths]
+    members = [_layers(p, m) for p, m in zip(paths, models)]
+    depth = {len(convs) for convs, _, _ in members}
+    if len(depth) != 1:
+        raise SystemExit(f"{', '.join(map(str, paths))}: the members have different depths ({sorted(depth)})")
+    n = len(members)
+    nodes, inits, x = [], [], "clip"
+    for k in range(depth.pop()):
+        convs = [(convs[k], w) for convs, _, w in members]
+        attributes = [_attributes(c) for c, _ in convs]
+        if any(a != attributes[0] for a in attributes) or any(len(c.input) != 3 for c, _ in convs):
+            raise SystemExit(f"convolution {k}: the members' shapes differ; they must come from one architecture")
+        weight = np.concatenate([w[c.input[1]] for c, w in convs])
+        bias = np.concatenate([w[c.input[2]] for c, w in convs])
+        inits += [numpy_helper.from_array(weight, f"conv{k}.weight"), numpy_helper.from_array(bias, f"conv{k}.bias")]
+        nodes += [helper.make_node("Conv", [x, f"conv{k}.weight", f"conv{k}.bias"], [f"conv{k}"], name=f"conv{k}",
+                                   **{**attributes[0], "group": 1 if k == 0 else n}),
+                  helper.make_node("Relu", [f"conv{k}"], [f"relu{k}"], name=f"relu{k}")]
+        x = f"relu{k}"
+    heads = [(head, w) for _, head, w in members]
+    if any(_attributes(h) != {"alpha": 1.0, "beta": 1.0, "transB": 1} for h, _ in heads):
+        raise SystemExit("the members' heads are not the linear layer scripts/train_judge.py exports")
+    weight = np.concatenate([w[h.input[1]] for h, w in heads], axis=1) / np.float32(n)
+    bias = np.mean([w[h.input[2]] for h, w in heads], axis=0, dtype=np.float32)
+    inits += [numpy_helper.from_array(weight.astype(np.float32), "head.weight"),
+              numpy_helper.from_array(bias, "head.bias")]
+    nodes += [helper.make_node("GlobalAveragePool", [x], ["pool"], name="pool"),
+              helper.make_node("Flatten", ["pool"], ["flat"], name="flat"),
+              helper.make_node("Gemm", ["flat", "head.weight", "head.bias"], ["logits"], name="head", transB=1)]
     first = models[0].graph
-    nodes, inits, outs = [], [], []
-    for i, m in enumerate(models):
-        g = m.graph
-        if [x.name for x in g.input] != ["clip"] or [x.name for x in g.output] != ["logits"]:
-            raise SystemExit(f"{paths[i]}: not a judge network (input 'clip', output 'logits')")
-        rename = {t.name: f"m{i}_{t.name}" for t in g.initializer}
-        for n in g.node:
-            rename.update({o: f"m{i}_{o}" for o in n.output})
-        for t in g.initializer:
-            t = onnx.TensorProto.FromString(t.SerializeToString())
-            t.name = rename[t.name]
-            inits.append(t)
-        for n in g.node:
-            n = onnx.NodeProto.FromString(n.SerializeToString())
-            n.name = f"m{i}_{n.name}"
-            n.input[:] = [rename.get(x, x) for x in n.input]
-            n.output[:] = [rename[x] for x in n.output]
-            nodes.append(n)
-        outs.append(rename["logits"])
-    total = outs[0]
-    for k, o in enumerate(outs[1:]):
-        nodes.append(helper.make_node("Add", [total, o], [f"sum{k}"], name=f"sum{k}"))
-        total = f"sum{k}"
-    inits.append(helper.make_tensor("inv_n", onnx.TensorProto.FLOAT, [], [1.0 / len(models)]))
-    nodes.append(helper.make_node("Mul", [total, "inv_n"], ["logits"], name="mean"))
     graph = helper.make_graph(nodes, "judge_ensemble", list(first.input), list(first.output), inits)
     model = helper.make_model(graph, opset_imports=list(models[0].opset_import), producer_name="ensemble_judge")
+    model.ir_version = models[0].ir_version
     onnx.checker.check_model(model)
     return model
 

@@ -1,16 +1,18 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 11: three networks averaged), from a fresh clone ($TASKS: docs/validity.md §1):
+    # LIBERO's weights (version 12: three networks averaged), from a fresh clone ($TASKS, $LIVING: docs/validity.md §1):
     wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
     wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
     wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4
     wsp build --platform libero --suite t5 --seed-range train --tasks $TASKS --primitives pull drop --count 40 \
         --workers 2 --out train-u
-    for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u --seed $s \
-        --out lb_v11_s$s.onnx; done
-    .venv/bin/python scripts/ensemble_judge.py lb_v11_s0.onnx lb_v11_s1.onnx lb_v11_s2.onnx \
-        --out wsp_eval/backends/weights/judge_net_v11_libero.onnx
+    wsp build --platform libero --suite t5 --seed-range train --tasks $LIVING --primitives push tap --count 32 \
+        --workers 2 --out train-lr
+    for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u train-lr \
+        --seed $s --out lr_s$s.onnx; done
+    .venv/bin/python scripts/ensemble_judge.py lr_s0.onnx lr_s1.onnx lr_s2.onnx \
+        --out wsp_eval/backends/weights/judge_net_v12_libero.onnx
 
     # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
     # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)
@@ -250,7 +252,7 @@ def main() -> None:
                          "object target (docs/judge.md, version 7)")
     ap.add_argument("--seed", type=int, default=SEED,
                     help="the initialisation, shuffling and augmentation seed; networks trained on the same data "
-                         "with other seeds make an ensemble (LIBERO's version 11: seeds 0, 1 and 2)")
+                         "with other seeds make an ensemble (LIBERO's versions 11 and 12: seeds 0, 1 and 2)")
     args = ap.parse_args()
     torch.manual_seed(args.seed)
     torch.set_num_threads(1)

@@ -64,7 +64,7 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform):
     there: on LIBERO's pairs missing from version 10's training (its builds cycled each primitive's task list from
     the start), version 10 scored 33 of 41 fresh references, confusing pulls with drops task by task; and a member
     that never saw them undid most of what the other learned when the two were averaged (docs/validity.md §1,
-    "After version 10"); version 11's three members each saw every pair ("Version 11"). Planned, not kept: a slot
+    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). Planned, not kept: a slot
     may still have failed every attempt."""
     from wsp_data.builders.base import BuildConfig
     from wsp_data.builders.t5 import T5Builder
@@ -88,7 +88,7 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform):
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("11 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("12 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     assert ", maniskill drop " in judge.version  # the object verifier's digest too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
@@ -98,8 +98,8 @@ def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refuse
 
 def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     """`scripts/ensemble_judge.py` (how ManiSkill's version 5 was made): one ONNX file whose logits are the mean of
-    its members' (here ALOHA's weights and ManiSkill's drop verifier, two single networks), with a record naming
-    both; float32 sums, so to 1e-5."""
+    its members' (here ALOHA's weights and ManiSkill's drop verifier, two single networks, run side by side as one
+    network), with a record naming both; float32 sums in another order, so to 1e-5."""
     import subprocess
 
     members = [PLATFORM_WEIGHTS["aloha"], OBJECT_WEIGHTS[("maniskill", "drop")]]
@@ -117,6 +117,9 @@ def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     assert np.allclose(mean, (both[0] + both[1]) / 2, atol=1e-5)
     assert subprocess.run([sys.executable, ENSEMBLE, str(members[0]), "--out", str(out)],
                           capture_output=True, text=True, timeout=120).returncode != 0  # one member: refused
+    nested = subprocess.run([sys.executable, ENSEMBLE, str(members[0]), str(PLATFORM_WEIGHTS["maniskill"]), "--out",
+                             str(tmp_path / "nested.onnx")], capture_output=True, text=True, timeout=120)
+    assert nested.returncode != 0 and "not an ensemble" in nested.stderr  # members are single trained networks
 
 
 def test_input_and_determinism(judge, clips):
