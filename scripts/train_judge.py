@@ -1,7 +1,7 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 12: three networks averaged), from a fresh clone ($TASKS, $LIVING: docs/validity.md §1):
+    # LIBERO's weights (version 12: three networks averaged), from a fresh clone ($TASKS, $LIVING: validity.md §1):
     wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
     wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
     wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4

@@ -64,8 +64,8 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform):
     there: on LIBERO's pairs missing from version 10's training (its builds cycled each primitive's task list from
     the start), version 10 scored 33 of 41 fresh references, confusing pulls with drops task by task; and a member
     that never saw them undid most of what the other learned when the two were averaged (docs/validity.md §1,
-    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). Planned, not kept: a slot
-    may still have failed every attempt."""
+    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). Planned, not
+    kept: a slot may still have failed every attempt."""
     from wsp_data.builders.base import BuildConfig
     from wsp_data.builders.t5 import T5Builder
     from wsp_data.platforms import kit
