@@ -59,12 +59,12 @@ def merged(paths: list[Path]) -> onnx.ModelProto:
     n = len(members)
     nodes, inits, x = [], [], "clip"
     for k in range(depth.pop()):
-        convs = [(convs[k], w) for convs, _, w in members]
-        attributes = [_attributes(c) for c, _ in convs]
-        if any(a != attributes[0] for a in attributes) or any(len(c.input) != 3 for c, _ in convs):
+        layer = [(convs[k], w) for convs, _, w in members]  # convolution k of every member, with its weights
+        attributes = [_attributes(c) for c, _ in layer]
+        if any(a != attributes[0] for a in attributes) or any(len(c.input) != 3 for c, _ in layer):
             raise SystemExit(f"convolution {k}: the members' shapes differ; they must come from one architecture")
-        weight = np.concatenate([w[c.input[1]] for c, w in convs])
-        bias = np.concatenate([w[c.input[2]] for c, w in convs])
+        weight = np.concatenate([w[c.input[1]] for c, w in layer])
+        bias = np.concatenate([w[c.input[2]] for c, w in layer])
         inits += [numpy_helper.from_array(weight, f"conv{k}.weight"), numpy_helper.from_array(bias, f"conv{k}.bias")]
         nodes += [helper.make_node("Conv", [x, f"conv{k}.weight", f"conv{k}.bias"], [f"conv{k}"], name=f"conv{k}",
                                    **{**attributes[0], "group": 1 if k == 0 else n}),
@@ -75,8 +75,7 @@ def merged(paths: list[Path]) -> onnx.ModelProto:
         raise SystemExit("the members' heads are not the linear layer scripts/train_judge.py exports")
     weight = np.concatenate([w[h.input[1]] for h, w in heads], axis=1) / np.float32(n)
     bias = np.mean([w[h.input[2]] for h, w in heads], axis=0, dtype=np.float32)
-    inits += [numpy_helper.from_array(weight.astype(np.float32), "head.weight"),
-              numpy_helper.from_array(bias, "head.bias")]
+    inits += [numpy_helper.from_array(weight, "head.weight"), numpy_helper.from_array(bias, "head.bias")]
     nodes += [helper.make_node("GlobalAveragePool", [x], ["pool"], name="pool"),
               helper.make_node("Flatten", ["pool"], ["flat"], name="flat"),
               helper.make_node("Gemm", ["flat", "head.weight", "head.bias"], ["logits"], name="head", transB=1)]
