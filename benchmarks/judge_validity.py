@@ -4,7 +4,8 @@ owes (SPEC §3 T5, docs/judge.md), on a release built on test seeds the judge ne
     .venv/bin/python benchmarks/judge_validity.py RELEASE [RELEASE ...] [--judge net rules] [--out FILE.json]
 
 Per platform (each `t5_<platform>` config; `t4_<platform>` configs add the still-object references):
-- agreement: label = intended primitive; full: the reference scores 100 (label, agent_ok and object_ok);
+- agreement: label = intended primitive; full: the reference scores 100 (label, agent_ok and object_ok); the
+  (task, primitive) pairs where a reference does not (a weak pair shows here before it moves a primitive's rate);
 - static: frame 0 repeated must score 0 against its intended primitive;
 - approach (the reference before first contact) and T4 references (distractor, false contact, spatial
   proximity): the object never moves, so never accepted (label, agent_ok and object_ok) as push, pull, drag, tap, knock-over or drop;
@@ -71,6 +72,18 @@ def judge_release(release: Path, judge) -> dict[str, list[dict]]:
     return out
 
 
+def _full(r: dict) -> bool:
+    """The clip scores 100 against its intended primitive."""
+    return bool(r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"])
+
+
+def _verdict(r: dict) -> str:
+    """A reference's verdict in a few words: its label, and which boolean failed where the label is right."""
+    if r["label"] != r["intended"]:
+        return str(r["label"])
+    return f"{r['label']} ({', '.join(k for k in ('agent_ok', 'object_ok') if not r[k])} false)"
+
+
 def summarize(records: list[dict]) -> dict:
     refs = [r for r in records if r["kind"] == "reference"]
     s: dict = {"per_primitive": {}, "confusion": {}}
@@ -80,6 +93,13 @@ def summarize(records: list[dict]) -> dict:
             s["per_primitive"][p] = {"n": len(mine), "agree": sum(r["label"] == p for r in mine),
                                      "full": sum(r["label"] == p and r["agent_ok"] and r["object_ok"] for r in mine)}
             s["confusion"][p] = dict(Counter(str(r["label"]) for r in mine))
+    pairs: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in refs:
+        pairs[(r["task"], r["intended"])].append(r)
+    s["pairs"] = len(pairs)
+    s["pairs_missed"] = {f"{task} · {p}": {"n": len(mine), "full": sum(map(_full, mine)),
+                                          "labels": dict(Counter(map(_verdict, (r for r in mine if not _full(r)))))}
+                         for (task, p), mine in sorted(pairs.items()) if not all(map(_full, mine))}
     s["agreement"] = sum(v["agree"] for v in s["per_primitive"].values()) / max(len(refs), 1)
     s["full"] = sum(v["full"] for v in s["per_primitive"].values()) / max(len(refs), 1)
     s["t5_score"] = float(np.mean([v["full"] / v["n"] for v in s["per_primitive"].values()])) if refs else None
@@ -88,7 +108,7 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == kind]
         return sum(bool(bad(r)) for r in mine), len(mine)
 
-    full = lambda r: r["label"] == r["intended"] and r["agent_ok"] and r["object_ok"]  # noqa: E731 - scores 100
+    full = _full
     s["static_nonzero"] = rate("static", full)
     accepted_moving = lambda r: r["label"] in MOVING and r["agent_ok"] and r["object_ok"]  # noqa: E731
     s["approach_accepted_moving"] = rate("approach", accepted_moving)
@@ -126,6 +146,14 @@ def markdown(judge_name: str, platform: str, s: dict) -> str:
               "| intended | " + " | ".join(cols) + " |", "|---|" + "---:|" * len(cols)]
     for p in labels:
         lines.append(f"| {p} | " + " | ".join(str(s["confusion"][p].get(c, "")) for c in cols) + " |")
+    if s["pairs"]:
+        lines += ["", f"(task, primitive) pairs with a reference that does not score 100: {len(s['pairs_missed'])} of "
+                  f"{s['pairs']}" + (":" if s["pairs_missed"] else "")]
+    if s["pairs_missed"]:
+        lines.append("")
+        lines += ["| task · primitive | n | scores 100 | the others' verdicts |", "|---|---:|---:|---|"]
+        lines += [f"| {k} | {v['n']} | {v['full']} | {', '.join(f'{lab} {c}' for lab, c in v['labels'].items())} |"
+                  for k, v in s["pairs_missed"].items()]
     lines += ["", "| check | bad / n | goal |", "|---|---:|---|",
               f"| static (frame 0 repeated) scores > 0 | {'%d / %d' % s['static_nonzero']} | 0 |",
               f"| approach before contact accepted as a moving primitive | {'%d / %d' % s['approach_accepted_moving']} | 0 |",
