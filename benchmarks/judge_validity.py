@@ -91,7 +91,7 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in refs if r["intended"] == p]
         if mine:
             s["per_primitive"][p] = {"n": len(mine), "agree": sum(r["label"] == p for r in mine),
-                                     "full": sum(r["label"] == p and r["agent_ok"] and r["object_ok"] for r in mine)}
+                                     "full": sum(map(_full, mine))}
             s["confusion"][p] = dict(Counter(str(r["label"]) for r in mine))
     pairs: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in refs:
@@ -108,8 +108,7 @@ def summarize(records: list[dict]) -> dict:
         mine = [r for r in records if r["kind"] == kind]
         return sum(bool(bad(r)) for r in mine), len(mine)
 
-    full = _full
-    s["static_nonzero"] = rate("static", full)
+    s["static_nonzero"] = rate("static", _full)
     accepted_moving = lambda r: r["label"] in MOVING and r["agent_ok"] and r["object_ok"]  # noqa: E731
     s["approach_accepted_moving"] = rate("approach", accepted_moving)
     s["t4_accepted_moving"] = rate("t4", accepted_moving)
@@ -120,14 +119,14 @@ def summarize(records: list[dict]) -> dict:
     for kind in ("frozen", "erased"):
         visible = [r for r in records if r["kind"] == kind and r["expected_object"] is False]
         unseen = [r for r in records if r["kind"] == kind and r["expected_object"] is None]
-        s[f"{kind}_scores"] = (sum(map(full, visible)), len(visible))
+        s[f"{kind}_scores"] = (sum(map(_full, visible)), len(visible))
         s[f"{kind}_accepted_moving"] = (sum(map(accepted_moving, visible)), len(visible))
-        s[f"{kind}_unseen_scores"] = (sum(map(full, unseen)), len(unseen))
+        s[f"{kind}_unseen_scores"] = (sum(map(_full, unseen)), len(unseen))
         s[f"{kind}_unseen_primitives"] = dict(Counter(r["intended"] for r in unseen))
     clear = [r for r in records if r["kind"] == "erased" and r["expected_object"] is False and r.get("clear")]
-    s["erased_clear_scores"] = (sum(map(full, clear)), len(clear))
+    s["erased_clear_scores"] = (sum(map(_full, clear)), len(clear))
     for k in DEGRADE:
-        s[f"full, {k}"] = rate(f"reference, {k}", full)
+        s[f"full, {k}"] = rate(f"reference, {k}", _full)
     s["expert_full"] = rate("expert", lambda r: r["label"] == r["expected"] and r["agent_ok"] and r["object_ok"])
     s["ms_per_clip"] = 1000 * float(np.median([r["seconds"] for r in records]))
     return s
