@@ -39,6 +39,8 @@ robot acting while the object fades out where it stood (`erased`: likewise), and
 gain/offset, left–right mirroring, jittered frame sampling with repeated frames, a shifted object position.
 Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.
 The training record (data checksums, counts, epochs, losses, train accuracy) is written beside the weights.
+`--init FILE --init-member I` fine-tunes member I of a shipped file instead of training from random weights
+(docs/judge.md, "Fine-tuning"; tried on LIBERO's version 12 and not shipped: docs/validity.md §1).
 """
 
 from __future__ import annotations
@@ -61,6 +63,7 @@ from wsp_eval.judge_data import DENSE, T5_KINDS, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
+BN_EPS = 1e-5  # torch's BatchNorm2d default
 T4_REPEAT = 4  # T4 still-object clips are few (one per T4 reference) and the hardest negatives: each epoch sees
 #   each of them this many times (differently augmented). Measured: once per epoch, 3 of 9 tiny-release T4
 #   references were still accepted as a moving primitive.
@@ -81,6 +84,76 @@ class JudgeNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.head(self.features(x))
+
+
+def member_weights(path: Path, member: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray]:
+    """Member `member` of a judge file, as exported here (one network: member 0) or joined by
+    `scripts/ensemble_judge.py` (the members side by side, later convolutions grouped): its convolutions' (weight,
+    bias) with batch norm folded in, and its linear head's weight and bias. An ensemble keeps only the mean of its
+    members' head biases, so that mean is every member's bias here (10 numbers; an initialisation, not a copy)."""
+    import onnx
+    from onnx import helper, numpy_helper
+
+    graph = onnx.load(str(path)).graph
+    ops = [n.op_type for n in graph.node]
+    k = len(ops) - 3
+    if k < 2 or ops[:k] != ["Conv", "Relu"] * (k // 2) or ops[k:] != ["GlobalAveragePool", "Flatten", "Gemm"]:
+        sys.exit(f"{path}: not a judge network as scripts/train_judge.py or scripts/ensemble_judge.py writes it "
+                 f"(Conv, ReLU, …, pool, linear); got {', '.join(dict.fromkeys(ops))}")
+    init = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+    convs = [n for n in graph.node if n.op_type == "Conv"]
+    groups = [{a.name: helper.get_attribute_value(a) for a in c.attribute}.get("group", 1) for c in convs]
+    n = groups[1]
+    if groups[0] != 1 or any(g != n for g in groups[1:]):
+        sys.exit(f"{path}: convolution groups {groups}: not one network or an ensemble of scripts/ensemble_judge.py")
+    if not 0 <= member < n:
+        sys.exit(f"{path}: holds {n} network(s); --init-member {member} is not one of them")
+    layers = []
+    for c in convs:
+        w, b = init[c.input[1]], init[c.input[2]]
+        rows = len(w) // n
+        layers.append((w[member * rows:(member + 1) * rows], b[member * rows:(member + 1) * rows]))
+    head = graph.node[-1]
+    w, b = init[head.input[1]], init[head.input[2]]
+    cols = w.shape[1] // n
+    return layers, w[:, member * cols:(member + 1) * cols] * np.float32(n), b
+
+
+def initialised(model: JudgeNet, path: Path, member: int) -> JudgeNet:
+    """`model` holding a trained member's weights: each convolution its folded weight, each batch norm the identity
+    plus the folded bias (statistics 0 and 1, scale √(1 + eps)); trained with those statistics frozen
+    (`freeze_norms`), it computes what the member computes until the weights move, and exports folded again."""
+    layers, head_w, head_b = member_weights(path, member)
+    convs = [m for m in model.features if isinstance(m, nn.Conv2d)]
+    norms = [m for m in model.features if isinstance(m, nn.BatchNorm2d)]
+    if [tuple(c.weight.shape) for c in convs] != [w.shape for w, _ in layers]:
+        sys.exit(f"{path}: member {member}'s convolutions do not have this script's shapes")
+    with torch.no_grad():
+        for conv, norm, (w, b) in zip(convs, norms, layers):
+            conv.weight.copy_(torch.tensor(w))
+            norm.running_mean.zero_()
+            norm.running_var.fill_(1.0)
+            norm.weight.fill_(float(np.sqrt(1.0 + BN_EPS)))
+            norm.bias.copy_(torch.tensor(b))
+        model.head[-1].weight.copy_(torch.tensor(head_w))
+        model.head[-1].bias.copy_(torch.tensor(head_b))
+    return model
+
+
+def init_record(path: Path, member: int) -> dict:
+    """Where a fine-tuned network started: the file, its checksum, the member, and that member's own training
+    record (which names the data it was trained on before; `test_judge_net` follows this chain)."""
+    record = json.loads(path.with_suffix(".json").read_text())
+    members = record.get("ensemble_of")
+    return {"weights": path.name, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(), "member": member,
+            "record": members[member]["record"] if members else record}
+
+
+def freeze_norms(model: nn.Module) -> None:
+    """Batch norms use their stored statistics (a fine-tuned member's, folded at export), never a batch's."""
+    for m in model.modules():
+        if isinstance(m, nn.BatchNorm2d):
+            m.eval()
 
 
 def augment(clip: Clip, rng: np.random.Generator) -> tuple[np.ndarray, tuple[float, float]]:
@@ -168,7 +241,9 @@ def load_clips(releases: list[Path], expert: bool = False, erased: bool = False)
     `erased`); a clip found in more than one release (the same
     config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
     once. A clip is known by its kind, instance, task, scene seed and build seed: slot k's scene seed is the same in
-    every build of a suite, so a build restricted to other tasks, or with another `--seed`, holds other clips."""
+    every build of a suite, so a build restricted to other tasks holds other clips. On the training range `--seed`
+    does not key the scenes: a T5 build that differs only by it holds the same instances again (measured on LIBERO,
+    2026-11-28), which are then loaded twice; T4's seed draws other interventions on the same scenes."""
     kinds = T5_KINDS + (("expert",) if expert else ()) + (("erased",) if erased else ())
     clips, seen = [], set()
     for release in releases:
@@ -250,6 +325,12 @@ def main() -> None:
                          "`erased`, object false): what world models often draw. `clear`: a negative only where its "
                          "reference shows the object visibly away from where it stood (`Clip.clear`), else no "
                          "object target (docs/judge.md, version 7)")
+    ap.add_argument("--init", type=Path, metavar="WEIGHTS.onnx",
+                    help="fine-tune: start from a trained network (or member --init-member of an ensemble file) "
+                         "instead of random weights, batch-norm statistics frozen as exported; use with a lower --lr "
+                         "and fewer --epochs (docs/judge.md, \"Fine-tuning\")")
+    ap.add_argument("--init-member", type=int, default=0, metavar="I", help="which member of the --init ensemble")
+    ap.add_argument("--lr", type=float, default=LR, help="the one-cycle schedule's peak learning rate")
     ap.add_argument("--seed", type=int, default=SEED,
                     help="the initialisation, shuffling and augmentation seed; networks trained on the same data "
                          "with other seeds make an ensemble (LIBERO's versions 11 and 12: seeds 0, 1 and 2)")
@@ -283,15 +364,19 @@ def main() -> None:
         for c in clips + held:
             c.label, c.agent = None, None  # the object output alone is trained
     model = JudgeNet()
-    opt = torch.optim.AdamW(model.parameters(), lr=LR, weight_decay=WEIGHT_DECAY)
+    if args.init:
+        initialised(model, args.init, args.init_member)
+    opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=WEIGHT_DECAY)
     pool = clips + [c for c in clips if c.kind == "t4"] * (T4_REPEAT - 1) + \
         [c for c in clips if c.kind == "reference"] * (repeat - 1)
     steps = args.epochs * ((len(pool) + BATCH - 1) // BATCH)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=LR, total_steps=steps)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=args.lr, total_steps=steps)
     rng = np.random.default_rng(args.seed)
     history, start = [], time.perf_counter()
     for epoch in range(args.epochs):
         model.train()
+        if args.init:
+            freeze_norms(model)
         order = rng.permutation(len(pool))
         total = 0.0
         for i in range(0, len(order), BATCH):
@@ -316,7 +401,8 @@ def main() -> None:
         "references_per_primitive": references,
         "excluded_tasks": args.exclude_tasks, "expert": args.expert, "erased": args.erased, "object_of": args.object_of,
         "object_targets": {"true": sum(c.object is True for c in clips), "false": sum(c.object is False for c in clips)},
-        "reference_repeat": repeat, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": LR,
+        "init": init_record(args.init, args.init_member) if args.init else None,
+        "reference_repeat": repeat, "epochs": args.epochs, "t4_repeat": T4_REPEAT, "batch": BATCH, "lr": args.lr,
         "weight_decay": WEIGHT_DECAY, "seed": args.seed,
         "loss_per_epoch": [round(v, 5) for v in history], "train_accuracy_unaugmented": train_acc,
         "onnx_vs_torch_max_abs_diff": worst, "seconds": round(time.perf_counter() - start, 1),
