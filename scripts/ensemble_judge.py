@@ -23,6 +23,14 @@ from onnx import helper, numpy_helper
 from wsp_eval.backends.judge_net import CHANNELS, SIDE
 
 
+def _judge_shaped(graph: onnx.GraphProto) -> bool:
+    """Convolutions each followed by ReLU, then pool, flatten, linear: one network as `scripts/train_judge.py`
+    exports it, or an ensemble as `merged` writes it."""
+    ops = [n.op_type for n in graph.node]
+    k = len(ops) - 3
+    return k >= 2 and ops[:k] == ["Conv", "Relu"] * (k // 2) and ops[k:] == ["GlobalAveragePool", "Flatten", "Gemm"]
+
+
 def _layers(path: Path, model: onnx.ModelProto) -> tuple[list[onnx.NodeProto], onnx.NodeProto, dict]:
     """A trained judge network's convolutions (each followed by ReLU, the first on `clip`) and its linear head,
     checked against the shape `scripts/train_judge.py` exports; and its weights by name."""
@@ -30,10 +38,8 @@ def _layers(path: Path, model: onnx.ModelProto) -> tuple[list[onnx.NodeProto], o
     if [x.name for x in g.input] != ["clip"] or [x.name for x in g.output] != ["logits"]:
         raise SystemExit(f"{path}: not a judge network (input 'clip', output 'logits')")
     ops = [n.op_type for n in g.node]
-    k = len(ops) - 3
     grouped = any(_attributes(n).get("group", 1) != 1 for n in g.node if n.op_type == "Conv")  # an ensemble made here
-    if (grouped or k < 2 or ops[:k] != ["Conv", "Relu"] * (k // 2)
-            or ops[k:] != ["GlobalAveragePool", "Flatten", "Gemm"]):
+    if grouped or not _judge_shaped(g):
         raise SystemExit(f"{path}: not one network as scripts/train_judge.py exports it (Conv, ReLU, …, pool, "
                          f"linear, ungrouped); got {', '.join(dict.fromkeys(ops))}. Give the single trained "
                          "networks, not an ensemble")
@@ -85,6 +91,34 @@ def merged(paths: list[Path]) -> onnx.ModelProto:
     model.ir_version = models[0].ir_version
     onnx.checker.check_model(model)
     return model
+
+
+def member(path: Path, i: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray]:
+    """Member `i` of a judge file, the inverse of `merged` (a single network is member 0): its convolutions'
+    (weight, bias), batch norm folded in as exported, and its linear head's weight and bias. `merged` keeps only the
+    mean of the members' head biases, so that mean is every member's bias here (10 numbers: what
+    `scripts/train_judge.py --init` starts from, not a copy of the member)."""
+    graph = onnx.load(str(path)).graph
+    if not _judge_shaped(graph):
+        raise SystemExit(f"{path}: not a judge network as scripts/train_judge.py or scripts/ensemble_judge.py writes "
+                         f"it (Conv, ReLU, …, pool, linear); got {', '.join(dict.fromkeys(n.op_type for n in graph.node))}")
+    weights = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+    convs = [n for n in graph.node if n.op_type == "Conv"]
+    groups = [_attributes(c).get("group", 1) for c in convs]
+    n = groups[1]
+    if groups[0] != 1 or any(g != n for g in groups[1:]):
+        raise SystemExit(f"{path}: convolution groups {groups}: not one network or an ensemble written here")
+    if not 0 <= i < n:
+        raise SystemExit(f"{path}: holds {n} network(s); --init-member {i} is not one of them")
+    layers = []
+    for c in convs:
+        w, b = weights[c.input[1]], weights[c.input[2]]
+        rows = len(w) // n
+        layers.append((w[i * rows:(i + 1) * rows], b[i * rows:(i + 1) * rows]))
+    head = graph.node[-1]
+    w, b = weights[head.input[1]], weights[head.input[2]]
+    cols = w.shape[1] // n
+    return layers, w[:, i * cols:(i + 1) * cols] * np.float32(n), b
 
 
 def main() -> None:

@@ -63,7 +63,6 @@ from wsp_eval.judge_data import DENSE, T5_KINDS, Clip, t4_clips, t5_clips
 from wsp_eval.release_format import RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
-BN_EPS = 1e-5  # torch's BatchNorm2d default
 T4_REPEAT = 4  # T4 still-object clips are few (one per T4 reference) and the hardest negatives: each epoch sees
 #   each of them this many times (differently augmented). Measured: once per epoch, 3 of 9 tiny-release T4
 #   references were still accepted as a moving primitive.
@@ -86,44 +85,13 @@ class JudgeNet(nn.Module):
         return self.head(self.features(x))
 
 
-def member_weights(path: Path, member: int) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray]:
-    """Member `member` of a judge file, as exported here (one network: member 0) or joined by
-    `scripts/ensemble_judge.py` (the members side by side, later convolutions grouped): its convolutions' (weight,
-    bias) with batch norm folded in, and its linear head's weight and bias. An ensemble keeps only the mean of its
-    members' head biases, so that mean is every member's bias here (10 numbers; an initialisation, not a copy)."""
-    import onnx
-    from onnx import helper, numpy_helper
-
-    graph = onnx.load(str(path)).graph
-    ops = [n.op_type for n in graph.node]
-    k = len(ops) - 3
-    if k < 2 or ops[:k] != ["Conv", "Relu"] * (k // 2) or ops[k:] != ["GlobalAveragePool", "Flatten", "Gemm"]:
-        sys.exit(f"{path}: not a judge network as scripts/train_judge.py or scripts/ensemble_judge.py writes it "
-                 f"(Conv, ReLU, …, pool, linear); got {', '.join(dict.fromkeys(ops))}")
-    init = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
-    convs = [n for n in graph.node if n.op_type == "Conv"]
-    groups = [{a.name: helper.get_attribute_value(a) for a in c.attribute}.get("group", 1) for c in convs]
-    n = groups[1]
-    if groups[0] != 1 or any(g != n for g in groups[1:]):
-        sys.exit(f"{path}: convolution groups {groups}: not one network or an ensemble of scripts/ensemble_judge.py")
-    if not 0 <= member < n:
-        sys.exit(f"{path}: holds {n} network(s); --init-member {member} is not one of them")
-    layers = []
-    for c in convs:
-        w, b = init[c.input[1]], init[c.input[2]]
-        rows = len(w) // n
-        layers.append((w[member * rows:(member + 1) * rows], b[member * rows:(member + 1) * rows]))
-    head = graph.node[-1]
-    w, b = init[head.input[1]], init[head.input[2]]
-    cols = w.shape[1] // n
-    return layers, w[:, member * cols:(member + 1) * cols] * np.float32(n), b
-
-
 def initialised(model: JudgeNet, path: Path, member: int) -> JudgeNet:
     """`model` holding a trained member's weights: each convolution its folded weight, each batch norm the identity
     plus the folded bias (statistics 0 and 1, scale √(1 + eps)); trained with those statistics frozen
     (`freeze_norms`), it computes what the member computes until the weights move, and exports folded again."""
-    layers, head_w, head_b = member_weights(path, member)
+    from ensemble_judge import member as member_of  # this script's directory is on sys.path when it runs
+
+    layers, head_w, head_b = member_of(path, member)
     convs = [m for m in model.features if isinstance(m, nn.Conv2d)]
     norms = [m for m in model.features if isinstance(m, nn.BatchNorm2d)]
     if [tuple(c.weight.shape) for c in convs] != [w.shape for w, _ in layers]:
@@ -133,7 +101,7 @@ def initialised(model: JudgeNet, path: Path, member: int) -> JudgeNet:
             conv.weight.copy_(torch.tensor(w))
             norm.running_mean.zero_()
             norm.running_var.fill_(1.0)
-            norm.weight.fill_(float(np.sqrt(1.0 + BN_EPS)))
+            norm.weight.fill_(float(np.sqrt(1.0 + norm.eps)))
             norm.bias.copy_(torch.tensor(b))
         model.head[-1].weight.copy_(torch.tensor(head_w))
         model.head[-1].bias.copy_(torch.tensor(head_b))

@@ -94,18 +94,17 @@ def _lineage_data(record: dict) -> list[dict]:
     return data
 
 
-def test_fine_tuning_starts_from_the_members_of_an_ensemble_file():
+def test_fine_tuning_starts_from_the_members_of_an_ensemble_file(monkeypatch):
     """`train_judge.py --init FILE --init-member I` starts from member I of an ensemble written by
     `ensemble_judge.py` (LIBERO's weights: three networks side by side): the three members unpacked into the
     training script's network, batch norms frozen at identity plus the folded bias, average to the file's own logits
     as OpenCV runs it, to float32 summation order (1e-4 on logits up to ≈ 6; measured 1.4e-6). A member the file does
     not hold is refused by name."""
-    import importlib.util
-
     torch = pytest.importorskip("torch")
-    spec = importlib.util.spec_from_file_location("train_judge", Path(ENSEMBLE).with_name("train_judge.py"))
-    train = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(train)
+    monkeypatch.syspath_prepend(str(Path(ENSEMBLE).parent))  # the scripts import each other, as when they run
+    import ensemble_judge
+    import train_judge as train
+
     weights = PLATFORM_WEIGHTS["libero"]
     x = np.random.default_rng(0).random((4, CHANNELS, SIDE, SIDE), dtype=np.float32)
     nets = [train.initialised(train.JudgeNet(), weights, i).eval() for i in range(3)]
@@ -116,7 +115,7 @@ def test_fine_tuning_starts_from_the_members_of_an_ensemble_file():
     assert np.abs(np.mean(logits, axis=0) - file.forward()).max() < 1e-4
     assert np.abs(logits[0] - logits[1]).max() > 0.1  # three different networks, not one copied
     with pytest.raises(SystemExit, match="holds 3 network.*--init-member 3"):
-        train.member_weights(weights, 3)
+        ensemble_judge.member(weights, 3)
 
 
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
