@@ -60,7 +60,7 @@ from torch import nn
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES
 from wsp_eval.backends.judge_net import CHANNELS, FRAME, at_frame_size, judge_input
 from wsp_eval.judge_data import DENSE, T5_KINDS, Clip, t4_clips, t5_clips
-from wsp_eval.release_format import RELEASE_JSON, split_config
+from wsp_eval.release_format import BUILD_REPORT, CARD, CROISSANT, RELEASE_JSON, split_config
 
 EPOCHS, BATCH, LR, WEIGHT_DECAY, SEED = 50, 32, 2e-3, 1e-4, 0
 T4_REPEAT = 4  # T4 still-object clips are few (one per T4 reference) and the hardest negatives: each epoch sees
@@ -186,10 +186,20 @@ def loss_of(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     return loss
 
 
+def data_digest(files: dict[str, str]) -> str:
+    """SHA-256 over a release's data files and their checksums (release.json's `files`) without the card, the
+    Croissant file and the build reports, which name the code commit and the build's timings: two builds of the same
+    instances give the same digest whoever built them, so a rebuild can be checked against a record."""
+    data = sorted((f, sha) for f, sha in files.items()
+                  if f not in (CARD, CROISSANT) and Path(f).name != BUILD_REPORT)
+    return hashlib.sha256(json.dumps(data).encode()).hexdigest()
+
+
 def data_record(release: Path) -> dict:
     meta = json.loads((release / RELEASE_JSON).read_text())
     t5 = {c: i["build_config"] for c, i in sorted(meta["configs"].items()) if split_config(c)[0] in ("t4", "t5")}
     return {"release": release.name, "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest(),
+            "data_sha256": data_digest(meta["files"]),
             "configs": {c: {k: b[k] for k in ("count", "seed", "tasks", "primitives") if k in b} for c, b in t5.items()},
             "seed_range": sorted({b.get("seed_range", "") for b in t5.values()})}
 

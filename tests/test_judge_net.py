@@ -118,6 +118,25 @@ def test_fine_tuning_starts_from_the_members_of_an_ensemble_file(monkeypatch):
         ensemble_judge.member(weights, 3)
 
 
+def test_a_training_record_names_its_data_by_content(monkeypatch, libero_release):
+    """`train_judge.py`'s record keeps, per training release, a digest of its data files (`data_sha256`) that a
+    rebuild of the same instances reproduces: release.json itself names the code commit and checksums the card and
+    the build reports (timings), so its own checksum changes with every commit. The digest ignores exactly those
+    and follows every data file."""
+    pytest.importorskip("torch")
+    monkeypatch.syspath_prepend(str(Path(ENSEMBLE).parent))
+    import train_judge as train
+
+    files = json.loads((libero_release / "release.json").read_text())["files"]
+    digest = train.data_digest(files)
+    assert train.data_record(libero_release)["data_sha256"] == digest
+    provenance = [f for f in files if f in ("README.md", "croissant.json") or f.endswith("/build_report.json")]
+    assert len(provenance) >= 3
+    assert train.data_digest({**files, **{f: "0" * 64 for f in provenance}}) == digest
+    for f in set(files) - set(provenance):  # every data file counts: the videos, the tables, the metadata
+        assert train.data_digest({**files, f: "0" * 64}) != digest, f
+
+
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
