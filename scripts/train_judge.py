@@ -188,9 +188,9 @@ def loss_of(out: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
 
 def data_digest(files: dict[str, str]) -> str:
     """SHA-256 over a release's data files and their checksums (release.json's `files`) without the card, the
-    Croissant file and the build reports, which name the code commit and the build's timings: two builds of the
-    same instances with the same toolchain give the same digest at any commit, so a rebuild can be checked against
-    a record."""
+    Croissant file and the build reports, which describe the build rather than its data (the card names the code
+    commit; all three carry the build config, its seed among them): two builds of the same instances with the same
+    toolchain give the same digest at any commit, so a rebuild can be checked against a record."""
     data = sorted((f, sha) for f, sha in files.items()
                   if f not in (CARD, CROISSANT) and Path(f).name != BUILD_REPORT)
     return hashlib.sha256(json.dumps(data).encode()).hexdigest()

@@ -120,9 +120,10 @@ def test_fine_tuning_starts_from_the_members_of_an_ensemble_file(monkeypatch):
 
 def test_a_training_record_names_its_data_by_content(monkeypatch, libero_release):
     """`train_judge.py`'s record keeps, per training release, a digest of its data files (`data_sha256`) that a
-    rebuild of the same instances reproduces: release.json itself names the code commit and checksums the card and
-    the build reports (timings), so its own checksum changes with every commit. The digest ignores exactly those
-    and follows every data file."""
+    rebuild of the same instances reproduces: release.json itself names the code commit and checksums the card, the
+    Croissant file and the build reports, which carry the build config (a training-range build's seed changes them
+    but not its instances), so its own checksum changes with every commit. The digest ignores exactly those and
+    follows every data file."""
     pytest.importorskip("torch")
     monkeypatch.syspath_prepend(str(Path(ENSEMBLE).parent))
     import train_judge as train
