@@ -16,25 +16,22 @@ import argparse
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
 import pyarrow.parquet as pq
+
+from wsp_eval.episode import episode_actions
+from wsp_eval.release_format import INSTANCES
 
 LOW = 0.05  # m: a hand that ends less than this above its lowest point after the branch has not withdrawn
 
 
 def rises(config_dir: Path, task: str | None) -> list[tuple[str, str, str, float]]:
     """(instance_id, task, primitive, rise in m) for every reference of one T5 config."""
-    inst = pq.read_table(config_dir / "instances.parquet").to_pylist()
-    data = pq.read_table(sorted((config_dir / "data").glob("chunk-*/*.parquet")),
-                         columns=["episode_index", "observation.ee_pose"]).to_pydict()
-    episodes = np.asarray(data["episode_index"])
-    z = np.asarray([p[2] for p in data["observation.ee_pose"]], dtype=np.float64)
     out = []
-    for row in inst:
+    for row in pq.read_table(config_dir / INSTANCES).to_pylist():
         if task and task not in row["task"]:
             continue
-        hz = z[episodes == row["episode_indices"][0]]
-        out.append((row["instance_id"], row["task"], row["primitive"], float(hz[-1] - hz[int(row["branch_step"]):].min())))
+        z = episode_actions(config_dir, row["episode_indices"][0], "observation.ee_pose")[:, 2]  # reads any column
+        out.append((row["instance_id"], row["task"], row["primitive"], float(z[-1] - z[int(row["branch_step"]):].min())))
     return out
 
 
@@ -46,8 +43,8 @@ def main() -> None:
     args = ap.parse_args()
     for release in args.releases:
         config_dir = release / args.config
-        if not (config_dir / "instances.parquet").is_file():
-            raise SystemExit(f"{config_dir}: no instances.parquet (is {release} a release with {args.config}?)")
+        if not (config_dir / INSTANCES).is_file():
+            raise SystemExit(f"{config_dir}: no {INSTANCES} (is {release} a release with {args.config}?)")
         by_primitive: dict[str, list[float]] = defaultdict(list)
         low_taps = []
         for instance_id, task, primitive, rise in rises(config_dir, args.task):
