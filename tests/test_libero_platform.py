@@ -202,3 +202,24 @@ def test_an_object_hidden_at_its_centre_is_named():
     pixel = project_256(placed.object_poses[0, :3], K, E, frame_size(placed.rgb))
     evidence = centre_hidden(placed.objects, 0, pixel)
     assert CENTRE_SIGHT_MAX < evidence["centre_gap"] < 4 and evidence["object_pixels"] > 20
+
+
+def test_a_tap_whose_withdrawal_a_fixture_stops_is_dropped():
+    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Version 13"). At scene seed 246458521 the tap backs
+    out under the wooden cabinet's top, which holds the hand 0.026 m above its strike height for the rest of the
+    clip: a hand left low beside the bowl, which is what a push looks like, not SPEC's press-and-retract. The
+    proposal is dropped (`tap_not_withdrawn`). At 265397658 the same task's tap lifts ~0.10 m and is kept, its
+    last step at least `TAP_MIN_RISE` above the back-out height."""
+    from wsp_data.builders.base import Dropped
+    from wsp_data.platforms.libero.primitives import TAP_MIN_RISE
+    from wsp_data.platforms.libero.t5 import LiberoRig
+
+    rig = LiberoRig("libero_90/KITCHEN_SCENE10_put_the_black_bowl_in_the_top_drawer_of_the_cabinet")
+    try:
+        stuck, free = rig.branch("tap", 246458521), rig.branch("tap", 265397658)
+        assert isinstance(stuck, Dropped) and stuck.reason == "tap_not_withdrawn"
+        assert not isinstance(free, Dropped)
+        ee = rig.state.replay(265397658, free.stream).stack("tcp_pose")[:, 2]
+        assert ee[-1] - ee[free.branch:].min() >= TAP_MIN_RISE
+    finally:
+        rig.close()

@@ -6,7 +6,9 @@ branch step, and acts on the task's target.
   the horizontal direction with the most free room (of ±x, ±y), then withdrawn upward.
 - pull: the expert's grasp, then the target slid `PULL_TRAVEL` toward the robot base at table height, released.
 - tap: the closed fingers beside the target strike it once at full speed (`TAP_REACH` past first contact)
-  and withdraw at once.
+  and withdraw at once: back out, then lift. A tap whose lift is stopped (the hand backed out under a fixture,
+  e.g. `KITCHEN_SCENE10`'s cabinet top) rises less than `TAP_MIN_RISE` and is dropped as `tap_not_withdrawn`:
+  SPEC's tap is a press-and-retract, and a hand left low beside the object is what a push looks like.
 - drop: the expert's grasp, a `DROP_LIFT` lift, the fingers opened in the air.
 """
 
@@ -29,6 +31,9 @@ PUSH_SPEED = 0.35  # OSC units (×0.05 m per step commanded)
 PULL_TRAVEL = 0.12  # m toward the robot base
 TAP_REACH = 0.02  # m the strike aims past the target's side
 DROP_LIFT = 0.12  # m
+WITHDRAW_LIFT = 0.10  # m
+TAP_MIN_RISE = 0.05  # m a tap's withdrawal must lift the hand (half of WITHDRAW_LIFT; measured: 0.094-0.105 m
+# when free, 0.026 m under KITCHEN_SCENE10's cabinet top)
 CLEAR = 0.05  # m above the target's top when moving over it
 HAND_CLEARANCE = 0.04  # m: fingertips at most this far below a target's top, so the hand passes over it
 DIRECTIONS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
@@ -72,7 +77,15 @@ def _approach(s: PickPlaceScript, point: np.ndarray) -> None:
 
 
 def _withdraw(s: PickPlaceScript) -> None:
-    s.move(s.g.ee() + [0, 0, 0.10], max_steps=25)
+    s.move(s.g.ee() + [0, 0, WITHDRAW_LIFT], max_steps=25)
+
+
+class Blocked(Exception):
+    """The scene stopped a primitive's scripted motion; `reason` is the drop reason."""
+
+    def __init__(self, reason: str):
+        super().__init__(reason)
+        self.reason = reason
 
 
 def push(s: PickPlaceScript) -> None:
@@ -114,7 +127,10 @@ def tap(s: PickPlaceScript) -> None:
             break
         s.act(np.r_[d * 1.0, 0, 0, 0, GRIPPER_CLOSED])
     s.move(start - d * 0.02, max_steps=20)
+    low = s.g.ee()[2]
     _withdraw(s)
+    if s.g.ee()[2] - low < TAP_MIN_RISE:
+        raise Blocked("tap_not_withdrawn")
 
 
 def drop(s: PickPlaceScript) -> None:
@@ -141,14 +157,16 @@ def compatible(primitive: str, spec: LiberoTaskSpec) -> bool:
 
 
 def branch_stream(platform: LiberoPlatform, spec: LiberoTaskSpec, seed: int, source: np.ndarray, branch: int,
-                  primitive: str) -> np.ndarray | None:
+                  primitive: str) -> np.ndarray | str:
     """The expert's stream up to step `branch` (replayed: identical to re-running its script), then
-    `primitive`, closed-loop; None if it runs out of steps."""
+    `primitive`, closed-loop; or why not: `primitive_out_of_time`, or the `Blocked` reason."""
     s = PickPlaceScript(platform, spec, seed)
     for a in source[:branch]:
         s.act(a)
     try:
         SCRIPTS[primitive](s)
     except OutOfTime:
-        return None
+        return "primitive_out_of_time"
+    except Blocked as e:
+        return e.reason
     return np.stack(s.actions)

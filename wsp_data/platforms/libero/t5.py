@@ -34,7 +34,7 @@ class LiberoRig(TaskRig):
             return Dropped("source_without_contact", simulated_steps=simulated)
         branch = max(1, contact - BACKOFF)
         stream = branch_stream(rig.state, rig.spec, seed, source, branch, primitive)
-        if stream is None:
-            return Dropped("primitive_out_of_time", simulated_steps=simulated)
+        if isinstance(stream, str):
+            return Dropped(stream, simulated_steps=simulated)
         simulated += len(stream)
         return Branch(source, stream, None, branch, contact, rig.spec.target, simulated)
