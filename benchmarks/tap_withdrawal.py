@@ -1,13 +1,17 @@
 """Does a T5 reference's hand withdraw at the end? Per release and primitive, from stored state (docs/validity.md §1,
 "Version 13").
 
-    .venv/bin/python benchmarks/tap_withdrawal.py RELEASE [RELEASE ...] [--config t5_libero] [--task SUBSTRING]
+    .venv/bin/python benchmarks/tap_withdrawal.py RELEASE [RELEASE ...] [--config t5_libero] [--task SUBSTRING] [--rebuild]
 
 For each T5 reference: the end effector's height at the clip's last frame above its lowest point after the branch
 step (`observation.ee_pose` z, metres). A tap is a press-and-retract (SPEC §3 T5), so its hand should end well
 above where it struck; a LIBERO push's clip often ends with the hand still low. Prints, per primitive, how many
 references end below `LOW` and the range of the rise, and lists the low taps. Reads the release alone (no
 simulator).
+
+`--rebuild` (LIBERO, needs the simulator; ≈ 6 s per tap): re-runs each tap's branch with today's builder
+(`LiberoRig.branch`, the tap script's own withdrawal check included) and says whether it still builds the same
+stream, or is now dropped and why: whether a release built before that check would come out the same.
 """
 
 from __future__ import annotations
@@ -35,11 +39,40 @@ def rises(config_dir: Path, task: str | None) -> list[tuple[str, str, str, float
     return out
 
 
+def rebuild_taps(config_dir: Path, task: str | None) -> None:
+    """Re-run every tap's branch with today's LIBERO builder; print each that is dropped or differs."""
+    import numpy as np
+
+    from wsp_data.builders.base import Dropped
+    from wsp_data.platforms.libero.t5 import LiberoRig
+
+    rows = [r for r in pq.read_table(config_dir / INSTANCES).to_pylist()
+            if r["primitive"] == "tap" and not (task and task not in r["task"])]
+    same = 0
+    for name in sorted({r["task"] for r in rows}):  # one task's simulators open at a time (~1 GB each)
+        rig = LiberoRig(name)
+        try:
+            for row in (r for r in rows if r["task"] == name):
+                b = rig.branch("tap", row["seed"])
+                stored = episode_actions(config_dir, row["episode_indices"][0], "action")  # one row per frame:
+                # the stream and a last frame after it
+                if isinstance(b, Dropped):
+                    print(f"  rebuilt tap {row['instance_id']}: dropped ({b.reason})", flush=True)
+                elif len(stored) != len(b.stream) + 1 or not np.array_equal(b.stream, stored[:-1]):
+                    print(f"  rebuilt tap {row['instance_id']}: a different stream", flush=True)
+                else:
+                    same += 1
+        finally:
+            rig.close()
+    print(f"  rebuilt taps: {same} of {len(rows)} the same stream")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("releases", type=Path, nargs="+")
     ap.add_argument("--config", default="t5_libero")
     ap.add_argument("--task", help="only tasks whose name contains this")
+    ap.add_argument("--rebuild", action="store_true", help="re-run each tap's branch with today's builder (simulator)")
     args = ap.parse_args()
     for release in args.releases:
         config_dir = release / args.config
@@ -53,9 +86,11 @@ def main() -> None:
                 low_taps.append(f"{instance_id} ({task.split('/')[-1]}, {rise:.3f} m)")
         cells = [f"{p} {sum(r < LOW for r in v)}/{len(v)} low, rise {min(v):.3f}–{max(v):.3f} m"
                  for p, v in sorted(by_primitive.items())]
-        print(f"{release}: " + "; ".join(cells))
+        print(f"{release}: " + "; ".join(cells), flush=True)
         for t in low_taps:
             print(f"  tap not withdrawn: {t}")
+        if args.rebuild:
+            rebuild_taps(config_dir, args.task)
 
 
 if __name__ == "__main__":
