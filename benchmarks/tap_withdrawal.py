@@ -1,5 +1,5 @@
 """Does a T5 reference's hand withdraw at the end? Per release and primitive, from stored state (docs/validity.md §1,
-"Version 13").
+"Version 13" and "Taps that never withdrew").
 
     .venv/bin/python benchmarks/tap_withdrawal.py RELEASE [RELEASE ...] [--config t5_libero] [--task SUBSTRING] [--rebuild]
 

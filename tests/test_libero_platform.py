@@ -205,11 +205,11 @@ def test_an_object_hidden_at_its_centre_is_named():
 
 
 def test_a_tap_whose_withdrawal_a_fixture_stops_is_dropped():
-    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Version 13"). At scene seed 246458521 the tap backs
-    out under the wooden cabinet's top, which holds the hand 0.026 m above its strike height for the rest of the
-    clip: a hand left low beside the bowl, which is what a push looks like, not SPEC's press-and-retract. The
-    proposal is dropped (`tap_not_withdrawn`). At 265397658 the same task's tap lifts ~0.10 m and is kept, its
-    last step at least `TAP_MIN_RISE` above the back-out height."""
+    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Taps that never withdrew"). At scene seed 246458521
+    the tap backs out under the wooden cabinet's top, which holds the hand 0.026 m above its strike height for the
+    rest of the clip: a hand left low beside the bowl, which is what a push looks like, not SPEC's
+    press-and-retract. The proposal is dropped (`tap_not_withdrawn`). At 265397658 the same task's tap lifts
+    ~0.10 m and is kept, its last step at least `TAP_MIN_RISE` above the back-out height."""
     from wsp_data.builders.base import Dropped
     from wsp_data.platforms.libero.primitives import TAP_MIN_RISE
     from wsp_data.platforms.libero.t5 import LiberoRig
