@@ -25,7 +25,8 @@ import pyarrow.parquet as pq
 from wsp_eval.episode import episode_actions
 from wsp_eval.release_format import INSTANCES
 
-LOW = 0.05  # m: a hand that ends less than this above its lowest point after the branch has not withdrawn
+LOW = 0.05  # m: a hand that ends less than this above its lowest point after the branch has not withdrawn: the
+# stored-state twin of LIBERO's build check `primitives.TAP_MIN_RISE` (not imported: that module needs the simulator)
 
 
 def rises(config_dir: Path, task: str | None) -> list[tuple[str, str, str, float]]:
