@@ -204,22 +204,23 @@ def test_an_object_hidden_at_its_centre_is_named():
     assert CENTRE_SIGHT_MAX < evidence["centre_gap"] < 4 and evidence["object_pixels"] > 20
 
 
-def test_a_tap_whose_withdrawal_a_fixture_stops_is_dropped():
-    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Taps that never withdrew"). At scene seed 246458521
-    the tap backs out under the wooden cabinet's top, which holds the hand 0.026 m above its strike height for the
-    rest of the clip: a hand left low beside the bowl, which is what a push looks like, not SPEC's
-    press-and-retract. The proposal is dropped (`tap_not_withdrawn`). At 265397658 the same task's tap lifts
-    ~0.10 m and is kept, its last step at least `TAP_MIN_RISE` above the back-out height."""
+def test_a_push_or_tap_whose_withdrawal_a_fixture_stops_comes_from_another_side():
+    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Pushes and taps from a side the hand can leave"). From
+    the side with the most room, the hand ends under the wooden cabinet's top, which holds it at the height it
+    pushed or struck at for the rest of the clip (measured: 0.017 m above it for the push of training seed 205,
+    0.026 m for the tap of scene seed 246458521). Both are built from the next side instead, so the clip ends
+    with the hand lifted like every other task's push and tap: at least `MIN_RISE` above its lowest point after
+    the branch (measured ≈ 0.094 m). Without the retry the tap was dropped and the push kept low."""
     from wsp_data.builders.base import Dropped
-    from wsp_data.platforms.libero.primitives import TAP_MIN_RISE
+    from wsp_data.platforms.libero.primitives import MIN_RISE
     from wsp_data.platforms.libero.t5 import LiberoRig
 
     rig = LiberoRig("libero_90/KITCHEN_SCENE10_put_the_black_bowl_in_the_top_drawer_of_the_cabinet")
     try:
-        stuck, free = rig.branch("tap", 246458521), rig.branch("tap", 265397658)
-        assert isinstance(stuck, Dropped) and stuck.reason == "tap_not_withdrawn"
-        assert not isinstance(free, Dropped)
-        ee = rig.state.replay(265397658, free.stream).stack("tcp_pose")[:, 2]
-        assert ee[-1] - ee[free.branch:].min() >= TAP_MIN_RISE
+        for primitive, seed in (("push", 205), ("tap", 246458521)):
+            b = rig.branch(primitive, seed)
+            assert not isinstance(b, Dropped), (primitive, b)
+            ee = rig.state.replay(seed, b.stream).stack("tcp_pose")[:, 2]
+            assert ee[-1] - ee[b.branch:].min() >= MIN_RISE, primitive
     finally:
         rig.close()

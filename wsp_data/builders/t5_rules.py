@@ -18,7 +18,7 @@ A platform may override a threshold for its scenes (`PlatformKit.t5_rule_thresho
 target (a bowl or a flat box), which slides and stops on its own, so its tap needs xy ≥ `tap_min_xy` = 0.015 m
 (push's threshold) under the same brief-contact conditions (measured: 0.026–0.047 m with 1–3 contact frames).
 LIBERO's tap script checks one more thing itself, from the hand's pose: that its withdrawal lifted the hand
-(`primitives.TAP_MIN_RISE`; else the proposal is dropped as `tap_not_withdrawn`).
+(`primitives.MIN_RISE`, as does its push; where the scene stops it, the same scene is tried from another side).
 Two identity conditions keep a primitive's label apart from its neighbours: rotate is in place (xy
 displacement ≤ 0.03 m, else it is a push that turned the object), and shake reverses direction at least 4
 times (two of its three cycles seen in the object, else it is a drag).

@@ -3,13 +3,18 @@ space on simulator state. Each continues a `PickPlaceScript` that replayed the e
 branch step, and acts on the task's target.
 
 - push: the closed fingers as a paddle, lowered beside the target and driven `PUSH_TRAVEL` through it along
-  the horizontal direction with the most free room (of ±x, ±y), then withdrawn upward.
+  a horizontal side (of ±x, ±y), then withdrawn upward.
 - pull: the expert's grasp, then the target slid `PULL_TRAVEL` toward the robot base at table height, released.
 - tap: the closed fingers beside the target strike it once at full speed (`TAP_REACH` past first contact)
-  and withdraw at once: back out, then lift. A tap whose lift is stopped (the hand backed out under a fixture,
-  e.g. `KITCHEN_SCENE10`'s cabinet top) rises less than `TAP_MIN_RISE` and is dropped as `tap_not_withdrawn`:
-  SPEC's tap is a press-and-retract, and a hand left low beside the object is what a push looks like.
+  and withdraw at once: back out, then lift.
 - drop: the expert's grasp, a `DROP_LIFT` lift, the fingers opened in the air.
+
+Push and tap act along the side with the most free room from the other objects. The room is weighed from
+movable objects only, so that side can lead the hand under a fixture (e.g. `KITCHEN_SCENE10`'s cabinet top),
+which then stops its lift: a hand left low beside the object at the end, what a push looks like and not SPEC's
+press-and-retract, and a push unlike every other task's. So each checks its own lift, which must raise the hand
+`MIN_RISE`; where it does not, the same scene is tried from the side with the next most room, and only when
+every side is stopped is the proposal dropped (`push_not_withdrawn`, `tap_not_withdrawn`).
 """
 
 from __future__ import annotations
@@ -32,16 +37,17 @@ PULL_TRAVEL = 0.12  # m toward the robot base
 TAP_REACH = 0.02  # m the strike aims past the target's side
 DROP_LIFT = 0.12  # m
 WITHDRAW_LIFT = 0.10  # m
-TAP_MIN_RISE = 0.05  # m a tap's withdrawal must lift the hand (half of WITHDRAW_LIFT; measured: 0.094-0.105 m
-# when free, 0.026 m under KITCHEN_SCENE10's cabinet top)
+MIN_RISE = 0.05  # m a push's or tap's withdrawal must lift the hand (half of WITHDRAW_LIFT; measured: 0.094-0.120 m
+# when free, 0.017-0.027 m under KITCHEN_SCENE10's cabinet top)
 CLEAR = 0.05  # m above the target's top when moving over it
 HAND_CLEARANCE = 0.04  # m: fingertips at most this far below a target's top, so the hand passes over it
 DIRECTIONS = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]])
 
 
-def _free_direction(s: PickPlaceScript) -> np.ndarray:
-    """Of ±x, ±y, the push direction whose path (0.15 m beyond the target) keeps farthest from every other
-    scene object's box, and whose approach side (the opposite one) is free too."""
+def _side(s: PickPlaceScript, rank: int) -> np.ndarray:
+    """Of ±x, ±y, the push direction with the `rank`-th most room (0: the most): room is how far its path
+    (0.15 m beyond the target) and its approach side (the opposite one) keep from every other scene object's box.
+    Ties keep the order of `DIRECTIONS`."""
     lo, hi = s.g.box(s.spec.target)
     centre = (lo + hi) / 2
     others = [s.g.box(n) for n in s.p.u.objects_dict if n != s.spec.target]
@@ -52,7 +58,7 @@ def _free_direction(s: PickPlaceScript) -> np.ndarray:
                 for p in pts]
         return min(gaps, default=1.0)
 
-    return max(DIRECTIONS, key=room)
+    return sorted(DIRECTIONS, key=room, reverse=True)[rank]
 
 
 def _beside(s: PickPlaceScript, d: np.ndarray) -> np.ndarray:
@@ -88,8 +94,16 @@ class Blocked(Exception):
         self.reason = reason
 
 
-def push(s: PickPlaceScript) -> None:
-    d = _free_direction(s)
+def _withdraw_clear(s: PickPlaceScript, primitive: str) -> None:
+    """`_withdraw`, which must lift the hand at least `MIN_RISE`; else `Blocked`."""
+    low = s.g.ee()[2]
+    _withdraw(s)
+    if s.g.ee()[2] - low < MIN_RISE:
+        raise Blocked(f"{primitive}_not_withdrawn")
+
+
+def push(s: PickPlaceScript, rank: int = 0) -> None:
+    d = _side(s, rank)
     start = _beside(s, d)
     _approach(s, start)
     goal = start + d * (STANDOFF + PUSH_TRAVEL)
@@ -101,7 +115,7 @@ def push(s: PickPlaceScript) -> None:
         a[:3] = np.clip(s.gain * err, -PUSH_SPEED, PUSH_SPEED)
         a[6] = GRIPPER_CLOSED
         s.act(a)
-    _withdraw(s)
+    _withdraw_clear(s, "push")
 
 
 def pull(s: PickPlaceScript) -> None:
@@ -116,8 +130,8 @@ def pull(s: PickPlaceScript) -> None:
     _withdraw(s)
 
 
-def tap(s: PickPlaceScript) -> None:
-    d = _free_direction(s)
+def tap(s: PickPlaceScript, rank: int = 0) -> None:
+    d = _side(s, rank)
     start = _beside(s, d)
     _approach(s, start)
     s.move(start, tol=0.003, max_steps=20)
@@ -127,10 +141,7 @@ def tap(s: PickPlaceScript) -> None:
             break
         s.act(np.r_[d * 1.0, 0, 0, 0, GRIPPER_CLOSED])
     s.move(start - d * 0.02, max_steps=20)
-    low = s.g.ee()[2]
-    _withdraw(s)
-    if s.g.ee()[2] - low < TAP_MIN_RISE:
-        raise Blocked("tap_not_withdrawn")
+    _withdraw_clear(s, "tap")
 
 
 def drop(s: PickPlaceScript) -> None:
@@ -141,7 +152,8 @@ def drop(s: PickPlaceScript) -> None:
         s.act(np.array([0, 0, 0, 0, 0, 0, GRIPPER_OPEN]))
 
 
-SCRIPTS: dict[str, Callable[[PickPlaceScript], None]] = {"push": push, "pull": pull, "tap": tap, "drop": drop}
+SCRIPTS: dict[str, Callable[..., None]] = {"push": push, "pull": pull, "tap": tap, "drop": drop}
+SIDED = ("push", "tap")  # take the side's rank (`_side`) as a second argument
 
 
 def low_target(spec: LiberoTaskSpec) -> bool:
@@ -159,14 +171,19 @@ def compatible(primitive: str, spec: LiberoTaskSpec) -> bool:
 def branch_stream(platform: LiberoPlatform, spec: LiberoTaskSpec, seed: int, source: np.ndarray, branch: int,
                   primitive: str) -> np.ndarray | str:
     """The expert's stream up to step `branch` (replayed: identical to re-running its script), then
-    `primitive`, closed-loop; or why not: `primitive_out_of_time`, or the `Blocked` reason."""
-    s = PickPlaceScript(platform, spec, seed)
-    for a in source[:branch]:
-        s.act(a)
-    try:
-        SCRIPTS[primitive](s)
-    except OutOfTime:
-        return "primitive_out_of_time"
-    except Blocked as e:
-        return e.reason
-    return np.stack(s.actions)
+    `primitive`, closed-loop; a push or tap from its next side while the scene stops its withdrawal. Or why not:
+    `primitive_out_of_time`, or the `Blocked` reason of the last side tried."""
+    reason = ""
+    for rank in range(len(DIRECTIONS) if primitive in SIDED else 1):
+        s = PickPlaceScript(platform, spec, seed)
+        for a in source[:branch]:
+            s.act(a)
+        try:
+            SCRIPTS[primitive](s, rank) if primitive in SIDED else SCRIPTS[primitive](s)
+        except OutOfTime:
+            return "primitive_out_of_time"
+        except Blocked as e:
+            reason = e.reason
+            continue
+        return np.stack(s.actions)
+    return reason
