@@ -1,7 +1,7 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 13: three networks averaged), from a fresh clone ($TASKS, $LIVING, $K10: validity.md §1):
+    # LIBERO's weights (version 14: three networks averaged), from a fresh clone ($TASKS, $LIVING, $K10: validity.md §1):
     wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
     wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
     wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4
@@ -12,9 +12,9 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
     wsp build --platform libero --suite t5 --seed-range train --tasks $K10 --primitives push tap --count 48 \
         --workers 2 --out train-k10x
     for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u train-lr \
-        train-k10x --seed $s --out r13_s$s.onnx; done
-    .venv/bin/python scripts/ensemble_judge.py r13_s0.onnx r13_s1.onnx r13_s2.onnx \
-        --out wsp_eval/backends/weights/judge_net_v13_libero.onnx
+        train-k10x --seed $s --out r14_s$s.onnx; done
+    .venv/bin/python scripts/ensemble_judge.py r14_s0.onnx r14_s1.onnx r14_s2.onnx \
+        --out wsp_eval/backends/weights/judge_net_v14_libero.onnx
 
     # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
     # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)

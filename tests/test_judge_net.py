@@ -141,7 +141,7 @@ def test_a_training_record_names_its_data_by_content(monkeypatch, libero_release
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("13 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("14 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     assert ", maniskill drop " in judge.version  # the object verifier's digest too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")

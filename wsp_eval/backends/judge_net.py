@@ -31,9 +31,10 @@ ManiSkill's drops were the one primitive the network credited too rarely (81 % o
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
-networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 13: three networks averaged,
+networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 14: three networks averaged,
 likewise, trained with three seeds on the same clips, which hold every (task, primitive) pair T5 builds, the
-living-room and `KITCHEN_SCENE10` pushes and taps several times each), ALOHA's
+living-room and `KITCHEN_SCENE10` pushes and taps several times each, the latter built from a side the hand can
+leave), ALOHA's
 own (version 6). All three trained on frozen-object clips too (the robot acting, the object still:
 `wsp_eval.judge_data`). A platform without weights is refused with a message.
 """
@@ -50,10 +51,10 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "13"
+NAME, VERSION = "net", "14"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
-                    "libero": WEIGHTS_DIR / "judge_net_v13_libero.onnx",
+                    "libero": WEIGHTS_DIR / "judge_net_v14_libero.onnx",
                     "aloha": WEIGHTS_DIR / "judge_net_v6_aloha.onnx"}
 OBJECT_WEIGHTS = {("maniskill", "drop"): WEIGHTS_DIR / "judge_net_v9_maniskill_drop.onnx"}  # object verifiers
 FRAME, SIDE = 128, 64
@@ -180,7 +181,7 @@ class NetJudge:
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
         if self.weights:
             self.version = f"{VERSION} ({digests[self.weights]})"
-        else:  # "13 (maniskill f7acdb185864, libero 23ef58f855bc, aloha 50e4ca58fa78, maniskill drop 47902442f13d)"
+        else:  # "14 (maniskill f7acdb185864, libero 924611e4f9df, aloha 50e4ca58fa78, maniskill drop 47902442f13d)"
             named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
                      for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
             named += [f"{platform} {label} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]

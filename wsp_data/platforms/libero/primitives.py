@@ -37,7 +37,7 @@ PULL_TRAVEL = 0.12  # m toward the robot base
 TAP_REACH = 0.02  # m the strike aims past the target's side
 DROP_LIFT = 0.12  # m
 WITHDRAW_LIFT = 0.10  # m
-MIN_RISE = 0.05  # m a push's or tap's withdrawal must lift the hand (half of WITHDRAW_LIFT; measured: 0.094-0.120 m
+MIN_RISE = 0.05  # m a push's or tap's withdrawal must lift the hand (half of WITHDRAW_LIFT; measured: 0.094-0.111 m
 # when free, 0.017-0.027 m under KITCHEN_SCENE10's cabinet top)
 CLEAR = 0.05  # m above the target's top when moving over it
 HAND_CLEARANCE = 0.04  # m: fingertips at most this far below a target's top, so the hand passes over it
