@@ -179,7 +179,10 @@ def branch_stream(platform: LiberoPlatform, spec: LiberoTaskSpec, seed: int, sou
         for a in source[:branch]:
             s.act(a)
         try:
-            SCRIPTS[primitive](s, rank) if primitive in SIDED else SCRIPTS[primitive](s)
+            if primitive in SIDED:
+                SCRIPTS[primitive](s, rank)
+            else:
+                SCRIPTS[primitive](s)
         except OutOfTime:
             return "primitive_out_of_time"
         except Blocked as e:
