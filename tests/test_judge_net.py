@@ -44,9 +44,13 @@ def clips(suites_release, libero_release) -> list:
             + t4_clips(suites_release, "t4_maniskill") + t4_clips(libero_release, "t4_libero"))
 
 
-@pytest.mark.parametrize("platform", sorted(PLATFORM_WEIGHTS))
-def test_the_packaged_weights_and_their_training_record(platform):
-    weights = PLATFORM_WEIGHTS[platform]
+WHOLE_WEIGHTS = {**{(p, "network"): w for p, w in PLATFORM_WEIGHTS.items()},  # networks that judge every label
+                 **{(p, "verifier"): w for (p, label), w in OBJECT_WEIGHTS.items() if label is None}}
+
+
+@pytest.mark.parametrize("platform, role", sorted(WHOLE_WEIGHTS))
+def test_the_packaged_weights_and_their_training_record(platform, role):
+    weights = WHOLE_WEIGHTS[platform, role]
     record = json.loads(weights.with_suffix(".json").read_text())
     assert weights.stat().st_size < 20e6
     assert record["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
@@ -56,16 +60,17 @@ def test_the_packaged_weights_and_their_training_record(platform):
     assert platform in trained_on  # each platform's weights saw that platform's clips
 
 
-@pytest.mark.parametrize("platform", sorted(PLATFORM_WEIGHTS))
-def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform):
+@pytest.mark.parametrize("platform, role", sorted(WHOLE_WEIGHTS))
+def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform, role):
     """Every (task, primitive) pair T5 can build on a platform from its default task list was planned in the
     training builds of every network in that platform's weights (each member of an ensemble on its own: their
     configs are in the weights' record; the builder's own slot plan replayed). A judge never shown a pair may fail
     there: on LIBERO's pairs missing from version 10's training (its builds cycled each primitive's task list from
     the start), version 10 scored 33 of 41 fresh references, confusing pulls with drops task by task; and a member
     that never saw them undid most of what the other learned when the two were averaged (docs/validity.md §1,
-    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). Planned, not
-    kept: a slot may still have failed every attempt."""
+    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). The same for an
+    object verifier that judges every label (LIBERO's since version 15). Planned, not kept: a slot may still have
+    failed every attempt."""
     from wsp_data.builders.base import BuildConfig
     from wsp_data.builders.t5 import T5Builder
     from wsp_data.platforms import kit
@@ -73,7 +78,7 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform):
     platform_kit = kit(platform)
     buildable = {(task, primitive) for primitive, tasks in
                  platform_kit.t5_primitive_tasks(tuple(platform_kit.tasks())).items() for task in tasks}
-    record = json.loads(PLATFORM_WEIGHTS[platform].with_suffix(".json").read_text())
+    record = json.loads(WHOLE_WEIGHTS[platform, role].with_suffix(".json").read_text())
     for member in [m["record"] for m in record.get("ensemble_of", [])] or [record]:
         planned = set()
         for data in _lineage_data(member):
@@ -141,8 +146,8 @@ def test_a_training_record_names_its_data_by_content(monkeypatch, libero_release
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("14 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
-    assert ", maniskill drop " in judge.version  # the object verifier's digest too
+    assert judge.version.startswith("15 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert ", maniskill drop " in judge.version and ", libero object " in judge.version  # the object verifiers' too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
     custom = NetJudge(PLATFORM_WEIGHTS["aloha"])  # --judge-checkpoint: these weights judge every platform
@@ -212,11 +217,11 @@ def test_references_score_100_and_negatives_are_rejected(judge, clips):
         [(c.instance_id, c.primitive, v) for c, v in frozen if score_verdict(v, c.primitive)]
 
 
-def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, suites_release, libero_release):
+def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, suites_release):
     """Version 9: where the network says `drop` on a ManiSkill clip, `object_ok` is decided by the mean of its object
     logit and the drop verifier's (trained on training-range drops, `--object-of drop`; its record says so), then
     version 8's persistence rule. On the tiny release's drop: the reference scores 100 and its frozen clip (the
-    object held still) 0, with both probabilities in the evidence. LIBERO has no verifier: its drops are the
+    object held still) 0, with both probabilities in the evidence. A ManiSkill clip of another label is the
     network's alone."""
     weights = OBJECT_WEIGHTS[("maniskill", "drop")]
     record = json.loads(weights.with_suffix(".json").read_text())
@@ -233,9 +238,29 @@ def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, 
     frozen = [c for c in drops if c.kind == "frozen" and c.object is False]
     assert frozen and all(score_verdict(judge.judge(c.judge_frames(), c.object_px, "maniskill"), "drop") == 0.0
                           for c in frozen)
-    lb = next(c for c in t5_clips(libero_release, "t5_libero", ("reference",)) if c.primitive == "drop")
-    assert "p_object_verifier" not in judge.judge(lb.judge_frames(), lb.object_px, "libero").evidence
+    push = next(c for c in t5_clips(suites_release, "t5_maniskill", ("reference",)) if c.primitive == "push")
+    assert "p_object_verifier" not in judge.judge(push.judge_frames(), push.object_px, "maniskill").evidence
     assert NetJudge(PLATFORM_WEIGHTS["maniskill"]).verifier_for("maniskill", "drop") is None  # given weights: alone
+
+
+def test_a_libero_clip_gets_its_object_verdict_from_the_mean_with_an_erased_trained_verifier(judge, libero_release):
+    """Version 15: on LIBERO every label's `object_ok` is decided by the mean of the network's object logit and the
+    verifier's: three networks trained with version 14's recipe and data plus erased objects as negatives
+    (`--erased clear`; its record says so). Alone they doubt pushes and taps that slide under the gripper (151 of
+    164 references where version 14 keeps 160); the mean keeps version 14's references and credits fewer erased
+    objects (docs/validity.md §1, "Version 15"). On the tiny release: the mean is in the evidence, and on every
+    clip whose object is clearly erased the verifier doubts the object more than the network does, so the mean
+    lowers its credit."""
+    record = json.loads(OBJECT_WEIGHTS[("libero", None)].with_suffix(".json").read_text())
+    assert len(record["ensemble_of"]) == 3 and all(m["record"]["erased"] == "clear" for m in record["ensemble_of"])
+    clips = t5_clips(libero_release, "t5_libero", ("reference", "erased"))
+    verdicts = [(c, judge.judge(c.judge_frames(), c.object_px, "libero")) for c in clips]
+    for _, v in verdicts:
+        z = [np.log(v.evidence[k] / (1 - v.evidence[k])) for k in ("p_object", "p_object_verifier")]
+        assert v.evidence["p_object_mean"] == pytest.approx(1 / (1 + np.exp(-np.mean(z))), abs=1e-6)
+    erased = [(c, v) for c, v in verdicts if c.kind == "erased" and c.object is False]
+    assert erased and all(v.evidence["p_object_verifier"] < v.evidence["p_object"] for _, v in erased), \
+        [(c.instance_id, c.primitive, v.evidence) for c, v in erased]
 
 
 def test_persists_follows_the_object_to_the_end_of_the_clip():

@@ -23,11 +23,14 @@ still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an 
 erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
 which may hide it, so the network decides those alone.
 
-Since version 9, an object verifier (`OBJECT_WEIGHTS`; ManiSkill's drop alone) joins the network for one label on
-one platform: where the network names that label, `object_ok` is decided by the mean of the network's object logit
-and the verifier's (a network of the same architecture and input, whose object output alone was trained, on that
-primitive's training-range clips and T4 references: `scripts/train_judge.py --object-of`), before `persists`.
-ManiSkill's drops were the one primitive the network credited too rarely (81 % of fresh references).
+Since version 9, an object verifier (`OBJECT_WEIGHTS`) joins the network for one label on one platform, or for every
+label on one: where it applies, `object_ok` is decided by the mean of the network's object logit and the
+verifier's (a network of the same architecture and input), before `persists`. ManiSkill's drops (version 9): a
+network whose object output alone was trained, on that primitive's training-range clips and T4 references
+(`scripts/train_judge.py --object-of`); they were the one primitive the network credited too rarely (81 % of fresh
+references). LIBERO, every label (version 15): three networks trained with version 14's recipe plus erased objects
+as negatives (`--erased clear`); alone they reject nearly every erased object but doubt pushes and taps that slide
+under the gripper, and the mean keeps version 14's references while crediting fewer erased objects.
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
 by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
@@ -51,12 +54,13 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "14"
+NAME, VERSION = "net", "15"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v14_libero.onnx",
                     "aloha": WEIGHTS_DIR / "judge_net_v6_aloha.onnx"}
-OBJECT_WEIGHTS = {("maniskill", "drop"): WEIGHTS_DIR / "judge_net_v9_maniskill_drop.onnx"}  # object verifiers
+OBJECT_WEIGHTS = {("maniskill", "drop"): WEIGHTS_DIR / "judge_net_v9_maniskill_drop.onnx",  # object verifiers, by
+                  ("libero", None): WEIGHTS_DIR / "judge_net_v15_libero_object.onnx"}  # (platform, label); None: any
 FRAME, SIDE = 128, 64
 VIEWS = 3
 CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
@@ -181,10 +185,11 @@ class NetJudge:
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
         if self.weights:
             self.version = f"{VERSION} ({digests[self.weights]})"
-        else:  # "14 (maniskill f7acdb185864, libero 924611e4f9df, aloha 50e4ca58fa78, maniskill drop 47902442f13d)"
+        else:  # "15 (maniskill f7acdb185864, libero 924611e4f9df, aloha 50e4ca58fa78, maniskill drop 47902442f13d,
+            #        libero object 4439505d1e01)"
             named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
                      for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
-            named += [f"{platform} {label} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]
+            named += [f"{platform} {label or 'object'} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]
             self.version = f"{VERSION} ({', '.join(named)})"
 
     def weights_for(self, platform: str | None) -> Path:
@@ -203,9 +208,11 @@ class NetJudge:
         return _run(self.weights_for(platform), _inputs(frames, object_px))
 
     def verifier_for(self, platform: str | None, label: str | None) -> Path | None:
-        """The object verifier that decides `object_ok` for this platform and label (`OBJECT_WEIGHTS`), if any;
-        none when the given `weights` judge every platform."""
-        return None if self.weights else OBJECT_WEIGHTS.get((platform, label))
+        """The object verifier that decides `object_ok` for this platform and label (`OBJECT_WEIGHTS`: the label's
+        own, else the platform's for any label), if any; none when the given `weights` judge every platform."""
+        if self.weights:
+            return None
+        return OBJECT_WEIGHTS.get((platform, label), OBJECT_WEIGHTS.get((platform, None)))
 
     def judge(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> Verdict:
         """One clip's verdict. An unreadable clip gets label None (scores 0; a judge never raises on a clip); a
