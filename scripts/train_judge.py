@@ -15,6 +15,11 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
         train-k10x --seed $s --out r14_s$s.onnx; done
     .venv/bin/python scripts/ensemble_judge.py r14_s0.onnx r14_s1.onnx r14_s2.onnx \
         --out wsp_eval/backends/weights/judge_net_v14_libero.onnx
+    # its object verifier (version 15): the same builds and seeds, erased objects as negatives
+    for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u train-lr \
+        train-k10x --erased clear --seed $s --out e15_s$s.onnx; done
+    .venv/bin/python scripts/ensemble_judge.py e15_s0.onnx e15_s1.onnx e15_s2.onnx \
+        --out wsp_eval/backends/weights/judge_net_v15_libero_object.onnx
 
     # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
     # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)

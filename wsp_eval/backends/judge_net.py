@@ -189,7 +189,8 @@ class NetJudge:
             #        libero object 4439505d1e01)"
             named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
                      for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
-            named += [f"{platform} {label or 'object'} {digests[path]}" for (platform, label), path in OBJECT_WEIGHTS.items()]
+            named += [f"{platform} {label or 'object'} {digests[path]}"
+                      for (platform, label), path in OBJECT_WEIGHTS.items()]
             self.version = f"{VERSION} ({', '.join(named)})"
 
     def weights_for(self, platform: str | None) -> Path:
