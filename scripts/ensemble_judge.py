@@ -128,6 +128,10 @@ def main() -> None:
     args = ap.parse_args()
     if len(args.members) < 2:
         ap.error("an ensemble needs at least two members")
+    missing = [str(p.with_suffix(".json")) for p in args.members if not p.with_suffix(".json").is_file()]
+    if missing:  # checked before anything is written: the ensemble's record is made of its members' records
+        ap.error(f"no training record beside a member: {', '.join(missing)} (scripts/train_judge.py writes it; "
+                 "for weights from the git history, `git show COMMIT:PATH.json` it too)")
     model = merged(args.members)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_bytes(model.SerializeToString())

@@ -178,6 +178,12 @@ def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     nested = subprocess.run([sys.executable, ENSEMBLE, str(members[0]), str(PLATFORM_WEIGHTS["maniskill"]), "--out",
                              str(tmp_path / "nested.onnx")], capture_output=True, text=True, timeout=120)
     assert nested.returncode != 0 and "not an ensemble" in nested.stderr  # members are single trained networks
+    bare = tmp_path / "bare.onnx"  # weights without their training record (as `git show` of the .onnx alone gives)
+    bare.write_bytes(members[1].read_bytes())
+    unrecorded = subprocess.run([sys.executable, ENSEMBLE, str(members[0]), str(bare), "--out",
+                                 str(tmp_path / "unrecorded.onnx")], capture_output=True, text=True, timeout=120)
+    assert unrecorded.returncode != 0 and "bare.json" in unrecorded.stderr  # named, before anything is written
+    assert not (tmp_path / "unrecorded.onnx").exists()
 
 
 def test_input_and_determinism(judge, clips):
