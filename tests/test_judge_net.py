@@ -24,8 +24,8 @@ import pytest
 
 from wsp_eval.backends.judge import score_verdict
 from wsp_eval.backends.errors import BackendUnavailable
-from wsp_eval.backends.judge_net import (CHANNELS, HIDDEN_AT_END, OBJECT_WEIGHTS, PERSIST_FRAMES, PLATFORM_WEIGHTS,
-                                         RELEASED, SIDE, NetJudge, at_frame_size, judge_input, persists)
+from wsp_eval.backends.judge_net import (CHANNELS, OBJECT_WEIGHTS, PERSIST_FRAMES, PLATFORM_WEIGHTS, RELEASED,
+                                         SIDE, NetJudge, at_frame_size, judge_input, persists)
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
@@ -146,7 +146,7 @@ def test_a_training_record_names_its_data_by_content(monkeypatch, libero_release
 def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refused(tmp_path):
     judge, frames = NetJudge(), np.zeros((12, 128, 128, 3), np.uint8)
     assert len({judge.weights_for(p) for p in ("maniskill", "libero", "aloha")}) == 3
-    assert judge.version.startswith("16 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
+    assert judge.version.startswith("17 (maniskill ") and ", libero " in judge.version and ", aloha " in judge.version
     assert ", maniskill drop " in judge.version and ", libero object " in judge.version  # the object verifiers' too
     with pytest.raises(BackendUnavailable, match="no weights for platform 'robotwin'.*train_judge.py"):
         judge.judge(frames, (64.0, 64.0), "robotwin")
@@ -290,38 +290,32 @@ def test_an_object_erased_where_the_robot_acts_is_not_credited(judge, suites_rel
     """`erased` clips (the robot acts, the object fades out where it stood, as world models draw it) of the primitives
     that end with the object released (`RELEASED`) score 0 on the ManiSkill and ALOHA tiny releases (5 and 5 here;
     version 7 credited them in half to three quarters of fresh clips, docs/validity.md §1), and every reference keeps
-    its object to the end. Drag, rotate and shake end in the hand, so the rule leaves them to the network, and
-    ManiSkill's pull since version 16 (`HIDDEN_AT_END`: the next test)."""
+    its object to the end. Drag, rotate and shake end in the hand, so the rule leaves them to the network."""
     for release, config in ((suites_release, "t5_maniskill"), (aloha_release, "t5_aloha")):
         clips = t5_clips(release, config, ("reference", "erased"))
         assert all(persists(c.judge_frames(), c.object_px) is not False for c in clips if c.kind == "reference")
-        erased = [c for c in clips if c.kind == "erased" and c.object is False and c.primitive in RELEASED
-                  and (c.platform, c.primitive) not in HIDDEN_AT_END]
+        erased = [c for c in clips if c.kind == "erased" and c.object is False and c.primitive in RELEASED]
         scored = [c.primitive for c in erased
                   if score_verdict(judge.judge(c.judge_frames(), c.object_px, c.platform), c.primitive)]
         assert len(erased) >= 4 and not scored, (config, scored)
 
 
-def test_a_maniskill_pull_is_left_to_the_network_at_its_end(judge, suites_release):
-    """Version 16: ManiSkill's pull script strokes from the camera's side and pulls the cube toward the base, so
-    the withdrawn hand may still cover it at the end (10 of 48 fresh pulls, which the persistence rule failed:
-    docs/validity.md §1, "Version 16"). A clip the network labels pull is judged without the rule (no
-    `object_persists` in its evidence): the tiny release's pull reference scores 100, and its erased clip, whose
-    object the rule does not find at the end, is credited now (the cost, measured there). Another released label
-    (tap) still gets the rule, which rejects its erased clip."""
-    assert HIDDEN_AT_END == {("maniskill", "pull")}
+def test_a_maniskill_pull_ends_with_its_cube_in_sight(judge, suites_release):
+    """Version 17: ManiSkill's pull script leaves the hand between the camera and the cube, and since then raises it
+    `PULL_RISE` (was 6 cm, which left the fingers over the cube in the image in 18 of 96 fresh pulls; version 16
+    exempted pulls from the persistence rule, and credited erased pulls: docs/validity.md §1, "Version 17"). The
+    tiny release's pull reference: the rule finds the cube in the last frames and it scores 100; its erased clip,
+    the cube faded out where the hand acted, is rejected by the rule."""
+    from wsp_data.platforms.maniskill.primitives import CLEARANCE, PULL_RISE
+
+    assert PULL_RISE >= 2 * CLEARANCE
     clips = t5_clips(suites_release, "t5_maniskill", ("reference", "erased"))
     ref = next(c for c in clips if c.kind == "reference" and c.primitive == "pull")
     v = judge.judge(ref.judge_frames(), ref.object_px, "maniskill")
-    assert score_verdict(v, "pull") == 100.0 and "object_persists" not in v.evidence, v
+    assert score_verdict(v, "pull") == 100.0 and v.evidence["object_persists"] == 1.0, v
     erased = next(c for c in clips if c.kind == "erased" and c.primitive == "pull")
-    frames = erased.judge_frames()
-    assert persists(frames, erased.object_px) is False  # what rejected it up to version 15
-    v = judge.judge(frames, erased.object_px, "maniskill")
-    assert score_verdict(v, "pull") == 100.0 and "object_persists" not in v.evidence, v
-    tap = next(c for c in clips if c.kind == "erased" and c.primitive == "tap" and c.object is False)
-    v = judge.judge(tap.judge_frames(), tap.object_px, "maniskill")
-    assert score_verdict(v, "tap") == 0.0 and v.evidence["object_persists"] == 0.0, v
+    v = judge.judge(erased.judge_frames(), erased.object_px, "maniskill")
+    assert score_verdict(v, "pull") == 0.0 and v.evidence.get("object_persists") == 0.0, v
 
 
 def test_aloha_weights_reject_a_robot_acting_on_an_object_that_does_not_respond(judge, aloha_release):

@@ -52,7 +52,7 @@ from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
-SCORING_VERSION = 19  # what the scores mean, in the report and the resume cache's key (a cache of an older version
+SCORING_VERSION = 20  # what the scores mean, in the report and the resume cache's key (a cache of an older version
 #   is discarded): bump it with every metric change. 2: T4's colour-region object tracker (docs/validity.md §2);
 #   3: T5's learned judge version 2, trained with twice the LIBERO references (docs/validity.md §1);
 #   4: T5's judge version 3: ALOHA's clips judged by weights trained on ALOHA (ManiSkill and LIBERO unchanged);
@@ -74,6 +74,8 @@ SCORING_VERSION = 19  # what the scores mean, in the report and the resume cache
 #       objects as negatives (§1, "Version 15")
 #   19: T5's judge version 16: ManiSkill's pull exempt from the persistence rule (the hand covers the pulled cube at
 #       the end; §1, "Version 16")
+#   20: T5's judge version 17: the rule applies to ManiSkill's pull again; its script raises the hand clear of the
+#       cube (§1, "Version 17")
 ENCODING_ON = "lossless at the reference resolution only"  # the report's `encoding_check`
 ENCODING_OFF = "off (lossy or resampled videos scored)"
 BOOTSTRAP = 1000  # resamples for the 95% CIs

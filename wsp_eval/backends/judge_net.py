@@ -21,9 +21,9 @@ Since version 8, for a primitive that ends with the object released (`RELEASED`)
 object to be there at the end (`persists`): where its frame-0 colour is distinct, T4's colour-region tracker must
 still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an object vanish; world models often
 erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
-which may hide it, so the network decides those alone. Since version 16, ManiSkill's pull too (`HIDDEN_AT_END`): its
-script strokes from the camera's side of the cube and pulls it toward the base, so the withdrawn hand still covers
-it at the end (the rule failed 18 of 96 fresh pulls; the four looked at show at most 2 px of its colour there).
+which may hide it, so the network decides those alone. (Version 16 exempted ManiSkill's pull too: its script
+left the hand over the pulled cube in the image, and the rule failed 18 of 96 fresh pulls. Since version 17 the
+script raises the hand clear of it, `wsp_data.platforms.maniskill.primitives.PULL_RISE`, and the rule applies again.)
 
 Since version 9, an object verifier (`OBJECT_WEIGHTS`) joins the network for one label on one platform, or for every
 label on one: where it applies, `object_ok` is decided by the mean of the network's object logit and the
@@ -56,7 +56,7 @@ import numpy as np
 from wsp_eval.backends.errors import BackendUnavailable
 from wsp_eval.backends.judge import JUDGE_FRAMES, PRIMITIVES, Verdict
 
-NAME, VERSION = "net", "16"
+NAME, VERSION = "net", "17"
 WEIGHTS_DIR = Path(__file__).with_name("weights")
 PLATFORM_WEIGHTS = {"maniskill": WEIGHTS_DIR / "judge_net_v6_maniskill.onnx",
                     "libero": WEIGHTS_DIR / "judge_net_v14_libero.onnx",
@@ -69,8 +69,6 @@ CHANNELS = VIEWS * (3 + 3 * (JUDGE_FRAMES - 1)) + 1
 MARK_SIGMA = 2.0
 PERSIST_FRAMES = 3  # of the 12: the last quarter of the clip, where an erased object is gone (`persists`)
 RELEASED = ("push", "pull", "tap", "knock-over", "drop")  # primitives that end with the object out of the hand
-HIDDEN_AT_END = {("maniskill", "pull")}  # (platform, label): released, but the hand may still cover the object at
-#   the end, so `persists` does not apply (docs/validity.md §1, "Version 16")
 
 
 def at_frame_size(frames: np.ndarray) -> np.ndarray:
@@ -233,7 +231,7 @@ class NetJudge:
                 p = float(1.0 / (1.0 + np.exp(-(z + float(logits[-1])) / 2)))
                 verdict = replace(verdict, object_ok=p >= 0.5, evidence={
                     **verdict.evidence, "p_object_verifier": float(1.0 / (1.0 + np.exp(-z))), "p_object_mean": p})
-            if not (verdict.object_ok and verdict.label in RELEASED) or (platform, verdict.label) in HIDDEN_AT_END:
+            if not (verdict.object_ok and verdict.label in RELEASED):
                 return verdict
             there = persists(frames, object_px)
             if there is None:

@@ -12,7 +12,9 @@ rest. Directions are set by the scene: `u` is the horizontal unit vector from th
 centre line).
 - push: closed hand, flat face leading, comes down 2.5 cm short of the object's base side and travels
   0.12 m along `u` (the object slides ≈ 9 cm).
-- pull: the same from the far side, 0.15 m back toward the base (−`u`; the object comes ≈ 12 cm).
+- pull: the same from the far side, 0.15 m back toward the base (−`u`; the object comes ≈ 12 cm); the hand then
+  rises `PULL_RISE`, well clear of the cube: it ends between the camera and the cube, and a 6 cm rise left its
+  fingers over the cube in the image in about one pull in five.
 - drag: top grasp, 5 mm off the table, carried 0.10 m along `v`, released.
 - rotate: top grasp, 5 mm off the table, turned 0.6 rad about the vertical through the hand, released.
 - shake: top grasp, lifted 0.02 m, three fast cycles of ±0.06 m along `v`, set down, released.
@@ -43,6 +45,7 @@ CLEARANCE = 0.06  # m the hand travels above an object's top
 FINGER_HALF_WIDTH = 0.01  # m from the TCP to the closed fingers' flat front face
 STROKE_GAP = 0.025  # m short of first touch where a side stroke starts
 PUSH_TRAVEL, PULL_TRAVEL = 0.12, 0.15  # m of hand travel from the stroke's start
+PULL_RISE = 0.14  # m the hand rises after a pull
 DRAG_DISTANCE, DRAG_LIFT = 0.10, 0.005
 ROTATE_ANGLE = 0.6  # rad
 SHAKE_AMPLITUDE, SHAKE_CYCLES, SHAKE_LIFT = 0.06, 3, 0.02
@@ -232,7 +235,7 @@ def pull(s: SkillScript, target: str, others: tuple[str, ...]) -> None:
     u = away_from_base(s, target)
     _stroke(s, target, -u, _side_height(s, target), STROKE_GAP, others)
     _moved(s, -PULL_TRAVEL * u, speed=0.5, settle=2)
-    _withdraw(s)
+    _withdraw(s, height=PULL_RISE)
 
 
 def _release(s: SkillScript) -> None:
