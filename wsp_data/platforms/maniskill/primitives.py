@@ -12,9 +12,10 @@ rest. Directions are set by the scene: `u` is the horizontal unit vector from th
 centre line).
 - push: closed hand, flat face leading, comes down 2.5 cm short of the object's base side and travels
   0.12 m along `u` (the object slides ≈ 9 cm).
-- pull: the same from the far side, 0.15 m back toward the base (−`u`; the object comes ≈ 12 cm); the hand then
-  rises `PULL_RISE`, well clear of the cube: it ends between the camera and the cube, and a 6 cm rise left its
-  fingers over the cube in the image in about one pull in five.
+- pull: the same from the far side, 0.15 m back toward the base (−`u`; the object comes ≈ 12 cm). Where the camera
+  looks from the hand's side (every task but PullCube, whose camera sits by the base), the hand ends between the
+  camera and the cube, and a 6 cm rise left its fingers over the cube in the image in about one pull in five: there
+  it rises `PULL_RISE`, well clear of the cube; elsewhere 6 cm, as every other primitive.
 - drag: top grasp, 5 mm off the table, carried 0.10 m along `v`, released.
 - rotate: top grasp, 5 mm off the table, turned 0.6 rad about the vertical through the hand, released.
 - shake: top grasp, lifted 0.02 m, three fast cycles of ±0.06 m along `v`, set down, released.
@@ -33,7 +34,7 @@ import sapien
 import sapien.physx as physx
 from mani_skill.utils.geometry.trimesh_utils import get_component_mesh
 
-from wsp_data.platforms.maniskill.env import GRIPPER_CLOSED, GRIPPER_OPEN, ExtraActor, ManiSkillPlatform
+from wsp_data.platforms.maniskill.env import CAMERA, GRIPPER_CLOSED, GRIPPER_OPEN, ExtraActor, ManiSkillPlatform
 from wsp_data.platforms.maniskill.experts import rotated, top_grasp, turn_closing_to
 from wsp_data.platforms.maniskill.skills import SkillScript
 
@@ -45,7 +46,7 @@ CLEARANCE = 0.06  # m the hand travels above an object's top
 FINGER_HALF_WIDTH = 0.01  # m from the TCP to the closed fingers' flat front face
 STROKE_GAP = 0.025  # m short of first touch where a side stroke starts
 PUSH_TRAVEL, PULL_TRAVEL = 0.12, 0.15  # m of hand travel from the stroke's start
-PULL_RISE = 0.14  # m the hand rises after a pull
+PULL_RISE = 0.14  # m the hand rises after a pull seen from the hand's side (`camera_on_side`)
 DRAG_DISTANCE, DRAG_LIFT = 0.10, 0.005
 ROTATE_ANGLE = 0.6  # rad
 SHAKE_AMPLITUDE, SHAKE_CYCLES, SHAKE_LIFT = 0.06, 3, 0.02
@@ -144,6 +145,12 @@ def lateral(s: SkillScript, actor: str, others: tuple[str, ...], reach: float = 
     return min((1.0, -1.0), key=score) * v
 
 
+def camera_on_side(s: SkillScript, actor: str, d: np.ndarray) -> bool:
+    """Whether the evaluated camera looks at the actor from the side `d` points to (horizontally)."""
+    eye = s.u.scene.sensors[CAMERA].camera.global_pose.sp.p
+    return float(((eye - s.pose(actor).p) * [1, 1, 0]) @ np.asarray(d, dtype=np.float64)) > 0.0
+
+
 def facing(s: SkillScript, d: np.ndarray) -> np.ndarray:
     """Hand orientation with the closing axis across `d`: the closed fingers' flat face leads."""
     return rotated(s._target, [0, 0, 1], turn_closing_to(s, [-d[1], d[0], 0.0])).q
@@ -235,7 +242,7 @@ def pull(s: SkillScript, target: str, others: tuple[str, ...]) -> None:
     u = away_from_base(s, target)
     _stroke(s, target, -u, _side_height(s, target), STROKE_GAP, others)
     _moved(s, -PULL_TRAVEL * u, speed=0.5, settle=2)
-    _withdraw(s, height=PULL_RISE)
+    _withdraw(s, height=PULL_RISE if camera_on_side(s, target, u) else CLEARANCE)
 
 
 def _release(s: SkillScript) -> None:
