@@ -75,7 +75,7 @@ SCORING_VERSION = 20  # what the scores mean, in the report and the resume cache
 #   19: T5's judge version 16: ManiSkill's pull exempt from the persistence rule (the hand covers the pulled cube at
 #       the end; §1, "Version 16")
 #   20: T5's judge version 17: the rule applies to ManiSkill's pull again; its script raises the hand clear of the
-#       cube (§1, "Version 17")
+#       cube where the camera looks from the hand's side (§1, "Version 17")
 ENCODING_ON = "lossless at the reference resolution only"  # the report's `encoding_check`
 ENCODING_OFF = "off (lossy or resampled videos scored)"
 BOOTSTRAP = 1000  # resamples for the 95% CIs

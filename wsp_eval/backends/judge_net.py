@@ -23,8 +23,8 @@ still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an 
 erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
 which may hide it, so the network decides those alone. (Version 16 exempted ManiSkill's pull too: its script
 left the hand over the pulled cube in the image, and the rule failed 18 of 96 fresh pulls. Since version 17 the
-script raises the hand clear of it where the camera looks from the hand's side, `wsp_data.platforms.maniskill.
-primitives.PULL_RISE`, and the rule applies again.)
+script raises the hand clear of it where the camera looks from the hand's side (`PULL_RISE` in ManiSkill's
+primitives), and the rule applies again.)
 
 Since version 9, an object verifier (`OBJECT_WEIGHTS`) joins the network for one label on one platform, or for every
 label on one: where it applies, `object_ok` is decided by the mean of the network's object logit and the
