@@ -1,6 +1,7 @@
-"""The learned primitive judge (`net`, the T5 default): a small convolutional network trained on simulator
-clips of training-range scene seeds only (`scripts/train_judge.py`), exported to ONNX and run by OpenCV's
-`dnn` module on the CPU, without torch. docs/judge.md says how it was trained and how well it agrees.
+"""The learned primitive judge (`net`, the default judge of T5's "primitive recognised" column): a small
+convolutional network trained on simulator clips of training-range scene seeds only (`scripts/train_judge.py`),
+exported to ONNX and run by OpenCV's `dnn` module on the CPU, without torch. Its agreement with the simulator is
+measured in docs/validity.md, Primitive recognition.
 
 It sees what SPEC §3 T5 lets a judge see: the 12 sampled frames and the evaluated object's frame-0 position.
 `judge_input` turns them into one (1, CHANNELS, SIDE, SIDE) float32 tensor, the same for training and judging:
@@ -17,32 +18,30 @@ the clip and of its left–right mirror (every primitive is mirror-symmetric; tr
 most likely primitive, and a boolean is true when its probability is ≥ 0.5. Deterministic: OpenCV's dnn on one
 thread, fixed preprocessing.
 
-Since version 8, for a primitive that ends with the object released (`RELEASED`), `object_ok` also needs the
-object to be there at the end (`persists`): where its frame-0 colour is distinct, T4's colour-region tracker must
-still find it in one of the last `PERSIST_FRAMES` frames. No primitive makes an object vanish; world models often
-erase it where the robot acts, which the network credits. Drag, rotate and shake end with the object in the hand,
-which may hide it, so the network decides those alone. (Version 16 exempted ManiSkill's pull too: its script
-left the hand over the pulled cube in the image, and the rule failed 18 of 96 fresh pulls. Since version 17 the
-script raises the hand clear of it where the camera looks from the hand's side (`PULL_RISE` in ManiSkill's
-primitives), and the rule applies again.)
+For a primitive that ends with the object released (`RELEASED`), `object_ok` also needs the object to be there at
+the end (`persists`): where its frame-0 colour is distinct, T4's colour-region tracker must still find it in one of
+the last `PERSIST_FRAMES` frames. No primitive makes an object vanish; world models often erase it where the robot
+acts, which the network alone would credit. Drag, rotate and shake end with the object in the hand, which may hide
+it, so the network decides those alone. ManiSkill's pull script raises the hand clear of the pulled cube where the
+camera looks from the hand's side (`PULL_RISE` in ManiSkill's primitives), so the rule applies to pulls too.
 
-Since version 9, an object verifier (`OBJECT_WEIGHTS`) joins the network for one label on one platform, or for every
-label on one: where it applies, `object_ok` is decided by the mean of the network's object logit and the
-verifier's (a network of the same architecture and input), before `persists`. ManiSkill's drops (version 9): a
-network whose object output alone was trained, on that primitive's training-range clips and T4 references
-(`scripts/train_judge.py --object-of`); they were the one primitive the network credited too rarely (81 % of fresh
-references). LIBERO, every label (version 15): three networks trained with version 14's recipe plus erased objects
-as negatives (`--erased clear`); alone they reject nearly every erased object but doubt pushes and taps that slide
-under the gripper, and the mean keeps version 14's references while crediting fewer erased objects.
+An object verifier (`OBJECT_WEIGHTS`) joins the network for one label on one platform, or for every label on one:
+where it applies, `object_ok` is decided by the mean of the network's object logit and the verifier's (a network
+of the same architecture and input), before `persists`. ManiSkill's drops: a network whose object output alone is
+trained, on that primitive's training-range clips and T4 references (`scripts/train_judge.py --object-of`); without
+it the network credits too few real drops. LIBERO, every label: three networks trained with the LIBERO network's
+recipe plus erased objects as negatives (`--erased clear`); alone they reject nearly every erased object but doubt
+pushes and taps that slide under the gripper, and the mean keeps the references while crediting fewer erased
+objects.
 
 Weights per platform (`PLATFORM_WEIGHTS`): the same network and input, trained on that platform's clips, chosen
-by the config's platform (never by anything in the submission): ManiSkill's own (version 6: one file holding two
-networks whose logits it averages, `scripts/ensemble_judge.py`), LIBERO's own (version 14: three networks averaged,
-likewise, trained with three seeds on the same clips, which hold every (task, primitive) pair T5 builds, the
-living-room and `KITCHEN_SCENE10` pushes and taps several times each, the latter built from a side the hand can
-leave), ALOHA's
-own (version 6). All three trained on frozen-object clips too (the robot acting, the object still:
-`wsp_eval.judge_data`). A platform without weights is refused with a message.
+by the config's platform (never by anything in the submission): ManiSkill's (one file holding two networks whose
+logits it averages, `scripts/ensemble_judge.py`), LIBERO's (three networks averaged likewise, trained with three
+seeds on the same clips, which hold every (task, primitive) pair T5 builds, the living-room and `KITCHEN_SCENE10`
+pushes and taps several times each, the latter built from a side the hand can leave) and ALOHA's (one network).
+All are trained on frozen-object clips too (the robot acting, the object still: `wsp_eval.judge_data`). A platform
+without weights is refused with a message. `VERSION` names the weights and rules together; CHANGELOG.md lists what
+each version changed.
 """
 
 from __future__ import annotations
@@ -184,11 +183,11 @@ class NetJudge:
         for path in files:
             if not path.is_file():
                 raise BackendUnavailable(f"judge backend 'net': weights not found at {path}; reinstall the package, "
-                                         "or train them with `scripts/train_judge.py` (see docs/judge.md)")
+                                         "or train them with `scripts/train_judge.py`")
         digests = {path: hashlib.sha256(path.read_bytes()).hexdigest()[:12] for path in files}
         if self.weights:
             self.version = f"{VERSION} ({digests[self.weights]})"
-        else:  # "15 (maniskill f7acdb185864, libero 924611e4f9df, aloha 50e4ca58fa78, maniskill drop 47902442f13d,
+        else:  # "17 (maniskill f7acdb185864, libero 924611e4f9df, aloha 50e4ca58fa78, maniskill drop 47902442f13d,
             #        libero object 4439505d1e01)"
             named = ["+".join(p for p, f in PLATFORM_WEIGHTS.items() if f == path) + f" {digests[path]}"
                      for path in dict.fromkeys(PLATFORM_WEIGHTS.values())]
@@ -203,8 +202,7 @@ class NetJudge:
         if platform not in PLATFORM_WEIGHTS:
             raise BackendUnavailable(f"judge backend 'net' has no weights for platform {platform!r} (it has: "
                                      f"{', '.join(PLATFORM_WEIGHTS)}); train them with `scripts/train_judge.py` on "
-                                     "that platform's training-range T4/T5 builds and pass --judge-checkpoint "
-                                     "(docs/judge.md)")
+                                     "that platform's training-range T4/T5 builds and pass --judge-checkpoint")
         return PLATFORM_WEIGHTS[platform]
 
     def logits(self, frames: np.ndarray, object_px: tuple[float, float], platform: str | None = None) -> np.ndarray:
