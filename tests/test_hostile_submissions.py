@@ -283,13 +283,13 @@ def test_wrong_frame_rates(sub, t1_release):
 
 def test_another_resolution_than_the_reference_is_refused(sub, t1_release, oracle_report, tmp_path):
     """A video resampled from the reference's 128×128 (here 2× up, losslessly) is refused by validate and score
-    (resampling alone costs the oracle up to 5 points, docs/validity.md §5); with --accept-lossy it is scored,
+    (resampling alone costs the oracle up to 5 points, docs/submission.md); with --accept-lossy it is scored,
     and T1, which compares an instance's videos pixel by pixel, then names the one unlike the others and scores
     that seed 0 instead of failing."""
     frames, _ = read_video(sub / rel(1))
     encode(sub / rel(1), np.repeat(np.repeat(frames, 2, axis=1), 2, axis=2))
     refused = "256×256 pixels; the references of t1_maniskill are 128×128: export at the reference's resolution " \
-              "(a resampled oracle loses up to 5 points of T1-T3, docs/validity.md §5), or score it anyway with " \
+              "(a resampled oracle loses up to 5 points of T1-T3, docs/submission.md), or score it anyway with " \
               "`wsp score --accept-lossy`"
     assert by_file(sub, t1_release) == {rel(1): [refused]}
     report = score_submission(sub, t1_release, tmp_path / "refused", progress=False, allow_missing=True)
@@ -331,7 +331,7 @@ def test_score_keeps_every_other_instance_and_resumes(sub, t1_release, oracle_re
     assert score_submission(sub, t1_release, out, progress=False, allow_missing=True)["timing"]["instances"] == 0
 
 
-# -- encodings (SPEC §4 "Encoding of submissions"; docs/validity.md) ------------------------------------------
+# -- encodings (SPEC §4 "Encoding of submissions"; docs/submission.md) ----------------------------------------
 LOSSY = {  # name → (pix_fmt, quality, the problem's first words)
     "4:2:0 crf 23": ("yuv420p", {"crf": "23"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),
     "4:2:0 qp 0": ("yuv420p", {"qp": "0"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),
@@ -379,7 +379,7 @@ def test_lossless_444_passes_and_lossy_scores_only_when_accepted(sub, t1_release
         encode(sub / rel(i), frames, fps=int(fps))
     assert validate(sub, t1_release) == []
     report = score_submission(sub, t1_release, tmp_path / "lossless", progress=False)
-    # tolerance: 4:4:4 YUV rounds each colour by at most ~1 level; measured change 0.0 points (docs/validity.md)
+    # tolerance: 4:4:4 YUV rounds each colour by at most ~1 level; measured change 0.0 points (docs/submission.md)
     assert abs(report["instances"][0]["score"] - oracle_report["instances"][0]["score"]) < 2.0
     frames, fps = read_video(sub / rel(1))
     encode(sub / rel(1), frames, fps=int(fps), pix_fmt="yuv420p", quality={"crf": "23"})

@@ -218,7 +218,7 @@ def check_frames(frames: object, num_frames: int, where: str, size: tuple[int, i
     if size is not None and arr.shape[1:3] != tuple(size):
         raise GenerateError(f"{where}: frames of {arr.shape[2]}×{arr.shape[1]} pixels; the reference frame is "
                             f"{size[1]}×{size[0]}: return frames at its resolution (resample in the model's "
-                            "adapter; scoring refuses other resolutions, docs/validity.md §5)")
+                            "adapter; scoring refuses other resolutions, docs/submission.md)")
     if arr.dtype == np.uint8:
         return arr
     if not np.isfinite(arr).all():

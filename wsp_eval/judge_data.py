@@ -41,7 +41,7 @@ VISIBLE_LEVELS = 40  # grey levels (any channel) a pixel must change by to count
 VISIBLE_AREA = 9e-4  # fraction of the frame that must change in some frame: ≈ 15 px at 128², 69 at 320×240.
 #   Measured on 64 fresh ManiSkill T5 references: frozen rotates change 1–8·10⁻⁴ of the frame (a 6° yaw of a
 #   cube 4–8 px wide), every other primitive 10–143·10⁻⁴ but one drop (2·10⁻⁴); a clip below it cannot be told
-#   from its reference by eye either, so it is no negative (docs/validity.md §1).
+#   from its reference by eye either, so it is no negative.
 FOOTPRINT_RADIUS = 0.12  # of the frame's smaller side: how far from its frame-0 position the object's footprint is
 #   looked for (15 px at 128², where ManiSkill's cubes are 4–8 px wide; 29 px at ALOHA's 320×240)
 

@@ -4,7 +4,7 @@ The reference side of an instance depends only on the release and the evaluator,
 computed once and reused by every later scoring of any submission: RMFA's reference flows (T2, T3;
 `wsp_eval.flow_cache`) and the reference's own results (T4: the evaluated object's visible fraction in the
 reference; T5: the judge's verdict on the reference), which spared every scoring of T4 and T5 decoding and
-tracking or judging each reference (docs/measurements.md).
+tracking or judging each reference (docs/performance.md).
 
 A folder is named by a key: the SHA-256 of the release's `release.json` (which lists every file's checksum) and
 what else the entries depend on, so a rebuilt release, another backend or changed scoring code never reads

@@ -33,7 +33,7 @@ REQUIRED_KEYS = {"model": str, "benchmark_version": str, "seeds": list}
 TRAIN_PREFIX = "train_"
 MAX_MANIFEST_BYTES = 1 << 20  # submission.json holds a few short fields; a larger one is refused unread
 RESAMPLED = ("export at the reference's resolution (a resampled oracle loses up to 5 points of T1-T3, "
-             "docs/validity.md §5), or score it anyway with `wsp score --accept-lossy`")
+             "docs/submission.md), or score it anyway with `wsp score --accept-lossy`")
 
 
 @dataclass(frozen=True)

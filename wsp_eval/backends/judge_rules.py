@@ -43,7 +43,7 @@ read, or whose object cannot be found in frame 0, gets label None.
 
 Known limit: "toward the robot" is read as "toward the top of the image". That holds for ManiSkill's base
 cameras in front of the robot, but PullCube's camera sits behind the robot, where push and pull are mirrored
-(and a tap rolls away behind the hand): those clips are misjudged. See docs/judge.md for the measured agreement.
+(and a tap rolls away behind the hand): those clips are misjudged.
 """
 
 from __future__ import annotations
