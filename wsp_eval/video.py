@@ -50,7 +50,7 @@ REEXPORT = "re-export it as an h264 mp4 (`wsp_eval.video.write_video` writes the
 LOSSLESS_FIX = ("save the model's frames losslessly: `wsp generate` and `wsp_eval.video.write_video` do (h264 RGB, "
                 "crf 0), as does `ffmpeg -i FRAMES -c:v libx264rgb -crf 0 -tune fastdecode seedK.mp4`; "
                 "re-encoding a lossy file losslessly keeps its codec noise, so export from the frames the model produced")
-"""The submission's encoding contract (SPEC §4 "Encoding of submissions"; docs/validity.md): every frame exactly as
+"""The submission's encoding contract (SPEC §4 "Encoding of submissions"; docs/submission.md): every frame exactly as
 the model produced it. Lossy codecs and chroma subsampling add noise that T1 reads as action compression (the
 oracle as h264 yuv420p crf 23 falls from 99.9 to 43 on T1), so they are refused before decoding."""
 MAX_SIDE = 512
@@ -244,7 +244,7 @@ class _Planar:
     `cv2.merge`: the same bytes as libswscale's conversion. Frames of at most `CHUNK_MAX_PIXELS` are gathered
     `MERGE_CHUNK` at a time and merged by one call, which saves OpenCV's per-call overhead (7 % of decoding at 128²);
     larger ones are merged one by one, straight from the decoder's planes, where the extra copy would cost more
-    (320×240: 5 % slower gathered; docs/measurements.md)."""
+    (320×240: 5 % slower gathered)."""
 
     def __init__(self, height: int, width: int):
         import cv2
@@ -283,7 +283,7 @@ class _Planar:
 def write_video(path, frames: np.ndarray, fps: float) -> None:
     """Write RGB uint8 frames (N, H, W, 3) as lossless RGB h264 (libx264rgb, crf 0) mp4: decoding gives back
     exactly these frames, so a baseline or a model run through `wsp generate` is scored on what it produced.
-    `tune fastdecode` (no CABAC) decodes in half the time for ≈ 15 % more bytes (docs/measurements.md)."""
+    `tune fastdecode` (no CABAC) decodes in half the time for ≈ 15 % more bytes (docs/performance.md)."""
     import av
 
     frames = np.asarray(frames, dtype=np.uint8)
