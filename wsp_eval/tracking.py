@@ -28,8 +28,8 @@ whole query grid follows that region — visible in a frame when a region of the
 grid (radius 10 px) is wider than a ManiSkill cube (6–8 px in the scoring frame), so most query points sit on
 the table, and grey LK loses the object's own points as soon as the fingers close on it; the table points stay
 visible and still, and a carried-away object goes undetected (grey LK alone detects 68 % of true motions over
-10 px on ManiSkill, with 6 % false alarms; `docs/validity.md`, T4). Colour survives where grey texture does not: a blue cube on orange wood,
-a grasped red cube between grey fingers. Where the colour is not distinct (textured or dark LIBERO objects, an
+10 px on ManiSkill, with 6 % false alarms; `docs/validity.md`, T4). Colour survives where grey texture does not:
+a blue cube on orange wood, a grasped red cube between grey fingers. Where the colour is not distinct (textured or dark LIBERO objects, an
 object coloured like the robot) the points are tracked by LK as above, from a grid of half the SPEC's radius
 (`LK_QUERY_RADIUS`): on the object itself rather than on its neighbours, so that an object lost under the fingers
 is invisible (a tracking failure) instead of read as still by the neighbours' points. The occlusion rule: an object hidden
