@@ -33,7 +33,7 @@ class TrainBuilder(SuiteBuilder):
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
         rig = self.rig(plan.task)
         # The rendered replay checks success itself, so the expert's unrendered verifying replay is skipped where
-        # it has one (`scripted`): it cost ≈ 10 % of a kept instance (docs/measurements.md, builder overhead).
+        # it has one (`scripted`): it would cost ≈ 10 % of a kept instance (docs/performance.md).
         actions = getattr(rig.expert, "scripted", rig.expert.trajectory)(seed)
         if actions is None:
             return Dropped("source_failed")

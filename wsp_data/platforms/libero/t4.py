@@ -1,5 +1,5 @@
-"""T4 on LIBERO: the task rig that proposes the three kinds' scene edits on a BDDL scene (moved from
-`wsp_data/builders/t4.py`; docs/libero.md)."""
+"""T4 on LIBERO: the task rig that proposes the three kinds' scene edits on a BDDL scene, for the platform-free
+builder `wsp_data/builders/t4.py` (docs/platforms/libero.md)."""
 
 from __future__ import annotations
 

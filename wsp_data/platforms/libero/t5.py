@@ -1,5 +1,6 @@
 """T5 on LIBERO: the task rig whose branch replays the expert's OSC stream up to the branch step and lets
-`primitives` continue closed-loop (moved from `wsp_data/builders/t5.py`; docs/libero.md)."""
+`primitives` continue closed-loop, for the platform-free builder `wsp_data/builders/t5.py`
+(docs/platforms/libero.md)."""
 
 from __future__ import annotations
 

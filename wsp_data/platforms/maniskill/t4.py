@@ -1,6 +1,6 @@
 """T4 on ManiSkill: which tasks serve which kind, the distractor palette, and the task rig that proposes the
-three kinds' scene edits (moved from `wsp_data/builders/t4.py`; docs/t4.md). Placements are computed in
-SAPIEN's pose convention (float32), as they always were."""
+three kinds' scene edits, for the platform-free builder `wsp_data/builders/t4.py` (docs/suites/t4.md).
+Placements are computed in SAPIEN's pose convention (float32)."""
 
 from __future__ import annotations
 

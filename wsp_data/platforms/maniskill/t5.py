@@ -1,5 +1,5 @@
-"""T5 on ManiSkill: which tasks serve which primitive, and the task rig that scripts the branch (moved from
-`wsp_data/builders/t5.py`; docs/t5.md). Knock-over and tap act on a prop (`primitives.PROPS`) the rig's scene
+"""T5 on ManiSkill: which tasks serve which primitive, and the task rig that scripts the branch, for the
+platform-free builder `wsp_data/builders/t5.py` (docs/suites/t5.md). Knock-over and tap act on a prop (`primitives.PROPS`) the rig's scene
 adds beside the target."""
 
 from __future__ import annotations
