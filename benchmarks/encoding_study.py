@@ -1,5 +1,5 @@
 """The oracle under common video encodings: what `wsp validate` says of each, and what each would score if it
-were accepted (`wsp score --accept-lossy`), per config, beside the lossless oracle (docs/validity.md).
+were accepted (`wsp score --accept-lossy`), per config, beside the lossless oracle (docs/submission.md).
 
     .venv/bin/python benchmarks/encoding_study.py RELEASE --out DIR [--workers 2] [--only TEXT ...]
 

@@ -1,4 +1,5 @@
-"""The T5 judge on a learned model's videos, against labels given by eye (validity.md §1, "T5 on a learned model").
+"""The T5 label judge on a learned model's videos, against labels given by eye (docs/validity.md, Primitive
+recognition).
 
 A generated video has no simulator state, so the judge's verdict on it can only be checked by looking. Two steps,
 run from a folder holding the releases and the submissions (paths are kept as given, relative ones relative to it):
@@ -17,7 +18,7 @@ sure); `robot` (is the robot what moves it: yes / no / - when nothing moves). By
 object stays or vanishes (no primitive happened), *accepted* when it shows the intended primitive done by the
 robot, *undecided* when the motion or the primitive is unclear; agreement is counted over decided clips. The key (`key.json`: id → release, config, episode,
 seed, intended primitive) is written beside the sheets and is read only by `compare`. The labels of
-docs/validity.md §1 ("A learned model's videos") are in `benchmarks/judge_on_learned/` with their key.
+the reference model's clips are in `benchmarks/judge_on_learned/` with their key.
 """
 
 from __future__ import annotations

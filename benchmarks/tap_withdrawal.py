@@ -1,5 +1,4 @@
-"""Does a T5 reference's hand withdraw at the end? Per release and primitive, from stored state (docs/validity.md §1,
-"Version 13", "Taps that never withdrew" and "Pushes and taps from a side the hand can leave").
+"""Does a T5 reference's hand withdraw at the end? Per release and primitive, from stored state (docs/suites/t5.md).
 
     .venv/bin/python benchmarks/tap_withdrawal.py RELEASE [RELEASE ...] [--config t5_libero] [--task SUBSTRING] [--rebuild]
 
@@ -10,9 +9,9 @@ references end below `LOW` and the range of the rise, and lists the low pushes a
 (no simulator).
 
 `--rebuild` (LIBERO, needs the simulator; ≈ 6 s per clip): re-runs each push's and tap's branch with today's
-builder (`LiberoRig.branch`, the scripts' own withdrawal check and next side included) and says whether it still
-builds the same stream, or another one (the same scene from another side), or is now dropped and why: whether a
-release built before those checks would come out the same.
+builder (`LiberoRig.branch`, the scripts' own withdrawal check and next side included) and says whether it
+builds the same stream, or another one (the same scene from another side), or drops it and why: whether the
+release's references are what the current builder makes.
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ def merged(paths: list[Path]) -> onnx.ModelProto:
     filters stacked (one convolution reads the clip once for all of them), the later ones grouped (member i's
     filters see only member i's channels), the linear heads joined into one that averages. The same arithmetic
     as running each member and averaging, up to float32 summation order; ≈ 13 % less network time than running
-    them one after another, ≈ 10 % of a LIBERO clip's judging (docs/measurements.md)."""
+    them one after another, ≈ 10 % of a LIBERO clip's judging."""
     models = [onnx.load(str(p)) for p in paths]
     members = [_layers(p, m) for p, m in zip(paths, models)]
     depth = {len(convs) for convs, _, _ in members}
