@@ -1,7 +1,8 @@
 """Train the learned T5 judge (`wsp_eval.backends.judge_net`) from simulator clips of training-range scene seeds,
 export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
 
-    # LIBERO's weights (version 14: three networks averaged), from a fresh clone ($TASKS, $LIVING, $K10: validity.md §1):
+    # LIBERO's weights (three networks averaged), from a fresh clone; $TASKS, $LIVING and $K10 are the task lists
+    # of train-u, train-lr and train-k10x in the weights' training record (judge_net_v14_libero.json):
     wsp build --platform libero --suite t5 --seed-range train --primitives tap pull --count 64 --workers 2 --out train-tp
     wsp build --platform libero --suite t5 --seed-range train --primitives push drop --count 56 --workers 2 --out train-pd
     wsp build --platform libero --suite t4 --seed-range train --count 48 --workers 2 --out train-t4
@@ -15,29 +16,16 @@ export it to ONNX and check that OpenCV's dnn gives the same outputs as torch.
         train-k10x --seed $s --out r14_s$s.onnx; done
     .venv/bin/python scripts/ensemble_judge.py r14_s0.onnx r14_s1.onnx r14_s2.onnx \
         --out wsp_eval/backends/weights/judge_net_v14_libero.onnx
-    # its object verifier (version 15): the same builds and seeds, erased objects as negatives
+    # its object verifier: the same builds and seeds, erased objects as negatives
     for s in 0 1 2; do .venv/bin/python scripts/train_judge.py train-tp train-pd train-t4 train-u train-lr \
         train-k10x --erased clear --seed $s --out e15_s$s.onnx; done
     .venv/bin/python scripts/ensemble_judge.py e15_s0.onnx e15_s1.onnx e15_s2.onnx \
         --out wsp_eval/backends/weights/judge_net_v15_libero_object.onnx
 
-    # the data: T4 and T5 references on training-range seeds (never a test seed); version 2 (LIBERO's weights
-    # until version 7; in the git history) was trained on exactly these builds, in this order (docs/judge.md)
-    wsp build --platform maniskill --suite t5 --seed-range train --count 128 --out judge-train
-    wsp build --platform libero    --suite t5 --seed-range train --count 48  --out judge-train
-    wsp build --platform maniskill --suite t4 --seed-range train --count 32  --out judge-train
-    wsp build --platform libero    --suite t4 --seed-range train --count 6   --out judge-train
-    wsp build --platform maniskill --suite t4 --seed-range train --count 96  --out judge-train2
-    wsp build --platform libero    --suite t4 --seed-range train --count 18  --out judge-train3
-    wsp build --platform libero    --suite t5 --seed-range train --count 96  --out judge-train-lb96 --workers 2
-    .venv/bin/python scripts/train_judge.py judge-train judge-train2 judge-train3 judge-train-lb96 \
-        --out wsp_eval/backends/weights/judge_net_v2.onnx
-
-    # (version 2's weights were trained before the frozen clips existed: `git checkout cd3aee8 --
-    # wsp_eval/judge_data.py` reproduces them)
-
-    # version 6, ManiSkill's and ALOHA's weights (two trainings averaged by scripts/ensemble_judge.py for
-    # ManiSkill): the commands are in docs/judge.md, "Version 6"
+The other shipped weights (ManiSkill's two networks, its drop verifier, ALOHA's network) are made the same way:
+each `.json` training record beside the weights in `wsp_eval/backends/weights/` names every build it was trained on
+(release, config, count, build seed, tasks, primitives where restricted, checksums; all on `--seed-range train`)
+and every training argument (epochs, batch, learning rate, seed, `--expert`, `--erased`, `--object-of`).
 
 Clips (`wsp_eval.judge_data`): every T5 reference (label, agent and object true), frame 0 repeated (both false),
 the approach before first contact (object false), the robot held still while the object moves (agent false), the
@@ -47,7 +35,7 @@ gain/offset, left–right mirroring, jittered frame sampling with repeated frame
 Deterministic on the CPU (fixed seeds, one thread): the same data and torch version give the same weights.
 The training record (data checksums, counts, epochs, losses, train accuracy) is written beside the weights.
 `--init FILE --init-member I` fine-tunes member I of a shipped file instead of training from random weights
-(docs/judge.md, "Fine-tuning"; tried on LIBERO's version 12 and not shipped: docs/validity.md §1).
+(none of the shipped weights is a fine-tune).
 """
 
 from __future__ import annotations
@@ -297,24 +285,24 @@ def main() -> None:
                          "accuracy every 5 epochs; the shipped judge trains on every clip (K = 0)")
     ap.add_argument("--exclude-tasks", nargs="+", default=[], metavar="TASK",
                     help="development only: train without these tasks' clips (a leave-task-out check of how the judge "
-                         "does on tasks it never saw; docs/validity.md §1)")
+                         "does on tasks it never saw)")
     ap.add_argument("--expert", action="store_true",
                     help="also train on the task experts' own primitives (T5 source rollouts of the tasks in "
-                         "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); ManiSkill's version 5")
+                         "wsp_eval.judge_data.EXPERT_PRIMITIVE, e.g. PullCube's pull); one of ManiSkill's two networks")
     ap.add_argument("--object-of", metavar="PRIMITIVE", nargs="+", choices=PRIMITIVES,
                     help="train an object verifier for these primitives (judge_net.OBJECT_WEIGHTS): only the object "
                          "output, on their T5 clips (references true; static, approach, frozen, erased false) and "
                          "every T4 reference (false); references repeated to weigh as much as the negatives "
-                         "(docs/judge.md: version 9, and the LIBERO tap/pull verifier tried)")
+                         "(ManiSkill's drop verifier)")
     ap.add_argument("--erased", nargs="?", const="all", choices=("all", "clear"),
                     help="also train on clips where the robot acts and the object fades out where it stood (kind "
                          "`erased`, object false): what world models often draw. `clear`: a negative only where its "
                          "reference shows the object visibly away from where it stood (`Clip.clear`), else no "
-                         "object target (docs/judge.md, version 7)")
+                         "object target (LIBERO's object verifier)")
     ap.add_argument("--init", type=Path, metavar="WEIGHTS.onnx",
                     help="fine-tune: start from a trained network (or member --init-member of an ensemble file) "
                          "instead of random weights, batch-norm statistics frozen as exported; use with a lower --lr "
-                         "and fewer --epochs (docs/judge.md, \"Fine-tuning\")")
+                         "and fewer --epochs")
     ap.add_argument("--init-member", type=int, default=0, metavar="I", help="which member of the --init ensemble")
     ap.add_argument("--lr", type=float, default=LR, help="the one-cycle schedule's peak learning rate")
     ap.add_argument("--seed", type=int, default=SEED,
