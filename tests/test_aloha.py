@@ -282,8 +282,7 @@ def test_oracle_scores_full_marks(aloha_release, tmp_path):
     for suite in ("t2", "t3", "t4"):
         assert suites[suite]["score"] == pytest.approx(100.0), suite
     assert suites["t1"]["score"] > 99.0  # r* is fixed on the simulator's frames; the stored video differs slightly
-    # T5 is the judge's agreement with ALOHA's references (ALOHA's own weights, version 6 since 2026-11-27: 63 of 64
-    # fresh references in docs/validity.md §1), so the 8 here (test seeds, never in its training) must all score 100
+    # T5: the oracle's clips are ALOHA's references (test seeds, never in the judge's training), so all 8 score 100
     assert suites["t5"]["score"] == pytest.approx(100.0)
     assert ", aloha 50e4ca58fa78" in report["backends"]["judge"]["version"]
 

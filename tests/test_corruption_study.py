@@ -1,8 +1,8 @@
-"""`wsp study corruption` (docs/validity.md §3) on the shared tiny ManiSkill T2 references.
+"""`wsp study corruption` (docs/validity.md, T2 and T3) on the shared tiny ManiSkill T2 references.
 
 Tolerances: the clean reference scored against itself is RMFA 100 up to nothing (same frames, same flows), so we
 ask ≥ 99.9. Corrupting the robot must cost more than corrupting an equal-area background region on every
-reference (measured on 50 references: robot 20–45 points, background under 2 — docs/validity.md), and
+reference (measured on 50 references: robot 20–45 points, background under 2), and
 stronger blur inside the robot mask must never score higher than weaker blur by more than flow noise (0.5).
 """
 

@@ -183,7 +183,7 @@ def test_first_import_is_non_interactive(tmp_path):
 
 
 def test_an_object_hidden_at_its_centre_is_named():
-    """A real scene (fresh LIBERO T4 set, docs/validity.md §2): the orange-juice carton placed as a distractor
+    """A real scene (a LIBERO T4 reference of the test range): the orange-juice carton placed as a distractor
     stands in front of the milk carton, whose top alone shows above it. T4's `centre_hidden` names the milk
     (nearest visible milk pixel ≈ 2.4 px from its projected centre, beyond `CENTRE_SIGHT_MAX`) and not the juice
     carton nor the basket, which the camera sees at their centres."""
@@ -205,12 +205,12 @@ def test_an_object_hidden_at_its_centre_is_named():
 
 
 def test_a_push_or_tap_whose_withdrawal_a_fixture_stops_comes_from_another_side():
-    """Real `KITCHEN_SCENE10` scenes (docs/validity.md §1, "Pushes and taps from a side the hand can leave"). From
+    """Real `KITCHEN_SCENE10` scenes (docs/suites/t5.md: pushes and taps from a side the hand can leave). From
     the side with the most room, the hand ends under the wooden cabinet's top, which holds it at the height it
     pushed or struck at for the rest of the clip (measured: 0.017 m above it for the push of training seed 205,
     0.026 m for the tap of scene seed 246458521). Both are built from the next side instead, so the clip ends
     with the hand lifted like every other task's push and tap: at least `MIN_RISE` above its lowest point after
-    the branch (measured ≈ 0.094 m). Without the retry the tap was dropped and the push kept low."""
+    the branch (measured ≈ 0.094 m). Without the retry the tap would be dropped and the push kept low."""
     from wsp_data.builders.base import Dropped
     from wsp_data.platforms.libero.primitives import MIN_RISE
     from wsp_data.platforms.libero.t5 import LiberoRig
