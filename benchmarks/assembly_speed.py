@@ -1,4 +1,4 @@
-"""Final assembly time against size (issue #14): is `assemble` linear in episodes, and what do workers buy?
+"""Final assembly time against size: is `assemble` linear in episodes, and what do workers buy?
 
 Takes one staged config (a `.wsp-staging/<config>` folder, left untouched) and assembles copies of it holding
 the first N kept episodes, for each N asked, into fresh folders; the copies' slots link to the staged rollouts

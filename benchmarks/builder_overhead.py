@@ -1,4 +1,4 @@
-"""What a kept instance costs the builder against the bare simulator (issue: scale-out, part 4a), per stage.
+"""What a kept instance costs the builder against the bare simulator, per stage.
 
 For each ManiSkill task, `--seeds` training-range instances of the train suite (one scripted-expert episode
 each) are decided in this one process, timing each stage of `TrainBuilder.attempt` and of staging in CPU
@@ -7,8 +7,8 @@ seconds of this process (`time.process_time`: robust to other work on the machin
 - script: the expert's scripted episode (end-effector control, unrendered), which makes the action stream;
 - render: the rendered replay — the "bare simulator" cost: reset, step and render, with the observations read;
 - checks: the SPEC §5 validity checks; stage: the rollout's arrays encoded as they are staged;
-- verify (not part of the total): the expert's unrendered verifying replay, which the train builder skipped
-  from 2026-11-26 on (the rendered replay checks success itself); the other suites still run it first.
+- verify (not part of the total): the expert's unrendered verifying replay, which the train builder skips (the
+  rendered replay checks success itself); the other suites run it first.
 
 Prints per task and in total the CPU seconds per stage and the ratio of the whole to the rendered replay, and
 the wall time per rendered step. Run two copies at once to see what two busy cores cost each other.

@@ -4,8 +4,8 @@
 
 T4 seeds its query grid around the evaluated object's projected frame-0 centre; where another object stands in
 front of that point, the grid follows the occluder, and a generation that moves the evaluated object could pass.
-Builds since 2026-11-26 drop such an instance (`object_hidden_at_centre`, `wsp_data.builders.t4.centre_hidden`).
-This script checks the instances of releases built before: for each T4 instance it rebuilds frame 0 in the
+The builder drops such an instance (`object_hidden_at_centre`, `wsp_data.builders.t4.centre_hidden`). This script
+checks a release's instances after the fact: for each T4 instance it rebuilds frame 0 in the
 simulator (the seed's scene with the instance's placement: the distractor's pose, the moved target's pose, or
 none for false contact; for T5, whose judge is given the same frame-0 point, the scene with its props),
 confirms that the rebuilt frame is the stored one (the first reference frame, and the stored

@@ -1,5 +1,5 @@
-"""Issue #13's acceptance check, drawn many times: tiny T5 builds of 8 references on scenes that no judge was
-trained, tuned or measured on (`--seed-range private`, one build seed per sample: README, "The build seed"),
+"""The T5 label judge's reference check, drawn many times: tiny T5 builds of 8 references on scenes that no judge
+was trained, tuned or measured on (`--seed-range private`, one build seed per sample, `wsp build --seed`),
 and the oracle's T5 on each, which is the judge's agreement averaged within primitive, then across primitives,
 as `wsp score` reports it. A sample passes at ≥ 90 (the check's bar for a sample of 8: every reference right).
 

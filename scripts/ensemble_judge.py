@@ -131,7 +131,7 @@ def main() -> None:
     missing = [str(p.with_suffix(".json")) for p in args.members if not p.with_suffix(".json").is_file()]
     if missing:  # checked before anything is written: the ensemble's record is made of its members' records
         ap.error(f"no training record beside a member: {', '.join(missing)} (scripts/train_judge.py writes it; "
-                 "for weights from the git history, `git show COMMIT:PATH.json` it too)")
+                 "copy a member's record along with its weights)")
     model = merged(args.members)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_bytes(model.SerializeToString())

@@ -216,8 +216,8 @@ def load_clips(releases: list[Path], expert: bool = False, erased: bool = False)
     config, slot and scene seed: a bigger build of the same config contains a smaller one's instances) is used
     once. A clip is known by its kind, instance, task, scene seed and build seed: slot k's scene seed is the same in
     every build of a suite, so a build restricted to other tasks holds other clips. On the training range `--seed`
-    does not key the scenes: a T5 build that differs only by it holds the same instances again (measured on LIBERO,
-    2026-11-28), which are then loaded twice; T4's seed draws other interventions on the same scenes."""
+    does not key the scenes: a T5 build that differs only by it holds the same instances again (measured on
+    LIBERO), which are then loaded twice; T4's seed draws other interventions on the same scenes."""
     kinds = T5_KINDS + (("expert",) if expert else ()) + (("erased",) if erased else ())
     clips, seen = [], set()
     for release in releases:

@@ -1,6 +1,6 @@
 """The config writer on synthetic rollouts (no simulator, seconds): one-episode video files packed into LeRobot's
 files in one pass each, frames where LeRobot looks for them, and byte-identical output whatever the folder and
-the number of workers (issue #14)."""
+the number of workers."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """`wsp study agreement`: human ratings (`wsp rate`) against score reports (`wsp score`), as the paper measures
-its evaluators (#13 part 4).
+its evaluators.
 
 Per rated rollout (model, config, episode, seed): the mean rating over annotators, and the metric's per-seed score
 from the report of that model. Reported per suite and overall: Spearman ρ between metric and mean rating (ties

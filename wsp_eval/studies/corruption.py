@@ -1,4 +1,4 @@
-"""RMFA under controlled visual corruption (the paper's §"RMFA Sensitivity in Task 2"; #13 part 3).
+"""RMFA under controlled visual corruption (the paper's §"RMFA Sensitivity in Task 2").
 
 For each of N T2 references (the first N instances of the config, by instance id), the reference video is
 corrupted and scored by RMFA against itself uncorrupted, exactly as a submission would be (`wsp_eval.suites.t2`):

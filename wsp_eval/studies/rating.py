@@ -1,4 +1,4 @@
-"""`wsp rate`: the paper's human rating study, served as a local page (127.0.0.1) — #13 part 4.
+"""`wsp rate`: the paper's human rating study, served as a local page (127.0.0.1).
 
 Items are (submission, config, instance, seed) of the chosen suites (default T2 and T3, the action-following
 suites the paper rated). The page shows the generated rollout beside its simulator reference, played in step,

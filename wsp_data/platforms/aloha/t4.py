@@ -26,7 +26,7 @@ TABLE = ((-0.25, 0.25), (0.32, 0.68))  # m: x and y ranges a placed object may t
 _CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
 
 
-EXCLUDED = {  # (kind, task) pairs never drawn, with the measured reason (8 attempts each, 2026-11-24)
+EXCLUDED = {  # (kind, task) pairs never drawn, with the measured reason (8 attempts each)
     ("false_contact", "peg_insertion"): "the open fingers pass over the 2 cm peg and hide it: the reference's own "
                                         "tracking drifts (7 of 8 attempts)",
     ("false_contact", "push_cube"): "the expert pushes with open fingers: there is no grasp to clamp open (8 of 8)",

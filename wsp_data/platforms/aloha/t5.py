@@ -9,8 +9,8 @@ from wsp_data.builders.rig import rollout_problem
 from wsp_data.builders.t5 import BACKOFF, SOURCE_PROP_MAX_SHIFT, Branch, first_contact, max_shift
 from wsp_data.platforms import kit
 
-# (primitive, task) pairs T5 never draws, with the measured reason (unrendered sweep, 20 seeds per pair,
-# 2026-11-24); every other pair kept all 20 proposals but knock-over on two_arm_lift (16: no room for the prop)
+# (primitive, task) pairs T5 never draws, with the measured reason (unrendered sweep, 20 seeds per pair); every
+# other pair kept all 20 proposals but knock-over on two_arm_lift (16: no room for the prop)
 EXCLUDED = {
     ("pull", "peg_insertion"): "the 12 cm peg lies along the pull, too long for the open fingers (7 cm apart) to "
                                "straddle: ≤ 0.044 m toward the base (0 of 20)",
