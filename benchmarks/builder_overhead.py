@@ -6,7 +6,7 @@ seconds of this process (`time.process_time`: robust to other work on the machin
 
 - script: the expert's scripted episode (end-effector control, unrendered), which makes the action stream;
 - render: the rendered replay — the "bare simulator" cost: reset, step and render, with the observations read;
-- checks: the SPEC §5 validity checks; stage: the rollout's arrays encoded as they are staged;
+- checks: the spec §5 validity checks; stage: the rollout's arrays encoded as they are staged;
 - verify (not part of the total): the expert's unrendered verifying replay, which the train builder skips (the
   rendered replay checks success itself); the other suites run it first.
 

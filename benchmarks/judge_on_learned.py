@@ -4,7 +4,7 @@ recognition).
 A generated video has no simulator state, so the judge's verdict on it can only be checked by looking. Two steps,
 run from a folder holding the releases and the submissions (paths are kept as given, relative ones relative to it):
 
-    # 1. blind sheets: per T5 instance of the submission, the 12 frames the judge sees (SPEC §3 T5) with the
+    # 1. blind sheets: per T5 instance of the submission, the 12 frames the judge sees (spec §4.5) with the
     #    object's frame-0 position ringed, in a shuffled order under anonymous ids; no primitive, no verdict
     .venv/bin/python benchmarks/judge_on_learned.py sheets --out SHEETS RELEASE:SUBMISSION [RELEASE:SUBMISSION ...]
     # ... label every sheet in SHEETS/labels.csv by eye (columns below), then:

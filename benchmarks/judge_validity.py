@@ -1,5 +1,5 @@
 """A T5 judge against the simulator: agreement per primitive with its confusion matrix, and the rejections it
-owes (SPEC §3 T5; docs/validity.md, Primitive recognition), on a release built on test seeds the judge never saw.
+owes (spec §4.5; docs/validity.md, Primitive recognition), on a release built on test seeds the judge never saw.
 
     .venv/bin/python benchmarks/judge_validity.py RELEASE [RELEASE ...] [--judge net rules] [--out FILE.json]
 

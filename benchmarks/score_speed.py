@@ -33,7 +33,7 @@ from wsp_eval.submission import VIDEO_NAME, test_configs
 from wsp_eval.suites import SCORERS
 from wsp_eval.video import read_video
 
-# instances per suite and platform (SPEC §3: ManiSkill / LIBERO / RoboTwin, which ALOHA stands in for)
+# instances per suite and platform (spec §3: ManiSkill / LIBERO / RoboTwin, which ALOHA stands in for)
 FULL_COUNTS = {"maniskill": {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 8 * 295},
                "libero": {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 4 * 500},
                "aloha": {"t1": 419, "t2": 1575, "t3": 1000, "t4": 640, "t5": 8 * 233}}

@@ -3,7 +3,7 @@
     .venv/bin/python benchmarks/tap_withdrawal.py RELEASE [RELEASE ...] [--config t5_libero] [--task SUBSTRING] [--rebuild]
 
 For each T5 reference: the end effector's height at the clip's last frame above its lowest point after the branch
-step (`observation.ee_pose` z, metres). A tap is a press-and-retract (SPEC §3 T5), so its hand should end well
+step (`observation.ee_pose` z, metres). A tap is a press-and-retract (spec §3.5), so its hand should end well
 above where it struck, and LIBERO's push script lifts the hand at its end too. Prints, per primitive, how many
 references end below `LOW` and the range of the rise, and lists the low pushes and taps. Reads the release alone
 (no simulator).

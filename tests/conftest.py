@@ -1,7 +1,7 @@
 """Shared fixtures: the tiny real releases (ManiSkill and LIBERO, rendered, LeRobot-written) that the tests
 share, each built once per run for every module and every xdist worker (`tiny_releases.py`).
 
-Hugging Face caches go to a temp folder and every hub access is offline (DESIGN: nothing downloads).
+Hugging Face caches go to a temp folder and every hub access is offline (spec §4.6: nothing downloads).
 """
 
 from __future__ import annotations

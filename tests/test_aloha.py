@@ -158,7 +158,7 @@ def episode(ds, index: int) -> dict:
 
 
 def valid(ep, qlimits) -> str | None:
-    """The common validity checks (SPEC §5) re-run on stored states, the way the builder runs them."""
+    """The common validity checks (spec §5) re-run on stored states, the way the builder runs them."""
     return check_rollout(ep["qpos"], ep["tcp"], ep["objects"], ep["actions"][:, JOINT_DIMS], qlimits,
                          ep["actions"], KIT.action_bounds, KIT.arm_joints)
 

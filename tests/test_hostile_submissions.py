@@ -271,7 +271,7 @@ def test_huge_submission_json_is_refused_by_size_before_parsing(sub, t1_release)
 
 
 def test_wrong_frame_rates(sub, t1_release):
-    """fps outside 1–240 is a problem; another plausible fps is the model's timebase (frame j at j/fps, SPEC §4)
+    """fps outside 1–240 is a problem; another plausible fps is the model's timebase (frame j at j/fps, spec §4.1)
     and is accepted."""
     for i, fps in ((0, 1000), (3, Fraction(1, 2)), (6, 10)):
         frames, _ = read_video(sub / rel(i))
@@ -331,7 +331,7 @@ def test_score_keeps_every_other_instance_and_resumes(sub, t1_release, oracle_re
     assert score_submission(sub, t1_release, out, progress=False, allow_missing=True)["timing"]["instances"] == 0
 
 
-# -- encodings (SPEC §4 "Encoding of submissions"; docs/submission.md) ----------------------------------------
+# -- encodings (spec §4.7; docs/submission.md) ----------------------------------------------------------------
 LOSSY = {  # name → (pix_fmt, quality, the problem's first words)
     "4:2:0 crf 23": ("yuv420p", {"crf": "23"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),
     "4:2:0 qp 0": ("yuv420p", {"qp": "0"}, "chroma-subsampled h264 (4:2:0, pix_fmt yuv420p)"),

@@ -1,4 +1,4 @@
-"""The evaluation side stands alone (DESIGN "Layout"): importing any `wsp_eval` module loads neither the build
+"""The evaluation side stands alone (spec §8.9): importing any `wsp_eval` module loads neither the build
 side nor a simulator nor torch; and no module of either package imports itself back at module level."""
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ def episode(ds, index: int) -> dict:
 
 
 def valid(ep) -> str | None:
-    """The common validity checks (SPEC §5) re-run on stored states, the way the builder runs them."""
+    """The common validity checks (spec §5) re-run on stored states, the way the builder runs them."""
     return check_rollout(ep["qpos"], ep["tcp"], ep["objects"], ep["joint"], QLIMITS, ep["actions"], (-1.0, 1.0))
 
 

@@ -1,5 +1,5 @@
 """`wsp score` end to end on real tiny releases (T1; T2, T3, T4 and T5), and the aggregation
-rules of SPEC §6 on records whose answers are worked out by hand.
+rules of spec §6 on records whose answers are worked out by hand.
 
 Tolerances:
 - T1 oracle ≥ 99: r* comes from the simulator's own frames, r from the decoded reference (h264 yuv444p crf 0,

@@ -408,7 +408,7 @@ def _pudding(n: int, lift: float) -> tuple[np.ndarray, tuple[int, int]]:
 
 
 def test_lk_stage_seeds_on_a_small_object_not_on_its_neighbours():
-    """The SPEC's grid (radius 10 px) around a 10 px object lies mostly on its neighbours: lifted 52 px, the
+    """The paper's grid (radius 10 px) around a 10 px object lies mostly on its neighbours: lifted 52 px, the
     object's own points are lost while the neighbours' stay visible and still, so its centroid reads < 10 px —
     a carried-away object that T4 would pass. The LK stage's grid (`LK_QUERY_RADIUS`, 5 px) lies on the object:
     its points are lost with it, visible in < 0.5 of the frames (the reference's object: all), a tracking

@@ -1,4 +1,4 @@
-"""The common validity checks (SPEC §5) on small state arrays: each failure names its reason."""
+"""The common validity checks (spec §5) on small state arrays: each failure names its reason."""
 
 import numpy as np
 

@@ -1,4 +1,4 @@
-"""Run a world model over a release and write a submission (DESIGN "Submission layout").
+"""Run a world model over a release and write a submission (spec §4.7.1).
 
 A model is either
 - per-episode: any callable `model(first_frame, actions, fps, seed) -> frames`: `first_frame` is the

@@ -1,4 +1,4 @@
-"""The submission contract (DESIGN "Submission layout") and its validate-only check.
+"""The submission contract (spec §4.7.1) and its validate-only check.
 
     <submission>/submission.json            model, benchmark_version, seeds [, configs, hardware, generation_seconds, model_info]
     <submission>/<config>/<episode_id>/seed<k>.mp4

@@ -1,4 +1,4 @@
-"""T4 point tracking (SPEC §3 T4), simulator-free: the default tracker backend (OpenCV pyramidal
+"""T4 point tracking (spec §4.4), simulator-free: the default tracker backend (OpenCV pyramidal
 Lucas–Kanade with a forward–backward check), the object displacement d, the distal-arm motion gate g and
 the per-rollout score S = 100·1[g ≥ 0.5·g_ref]·1[d ≤ 10].
 
@@ -24,13 +24,13 @@ it); with no visible point it carries its last value forward.
 The evaluated object goes first through a *colour-region* stage (`object_tracks`): when its frame-0 colour is
 distinct (its region of that colour is compact around the object and covers almost none of the robot), the
 whole query grid follows that region — visible in a frame when a region of the object's colour, at least
-`REGION_PART_MIN` of its frame-0 area, lies within `REGION_JUMP_MAX` px of its last position. Why: the SPEC's
+`REGION_PART_MIN` of its frame-0 area, lies within `REGION_JUMP_MAX` px of its last position. Why: the paper's
 grid (radius 10 px) is wider than a ManiSkill cube (6–8 px in the scoring frame), so most query points sit on
 the table, and grey LK loses the object's own points as soon as the fingers close on it; the table points stay
 visible and still, and a carried-away object goes undetected (grey LK alone detects 68 % of true motions over
 10 px on ManiSkill, with 6 % false alarms; `docs/validity.md`, T4). Colour survives where grey texture does not:
 a blue cube on orange wood, a grasped red cube between grey fingers. Where the colour is not distinct (textured or dark LIBERO objects, an
-object coloured like the robot) the points are tracked by LK as above, from a grid of half the SPEC's radius
+object coloured like the robot) the points are tracked by LK as above, from a grid of half the paper's radius
 (`LK_QUERY_RADIUS`): on the object itself rather than on its neighbours, so that an object lost under the fingers
 is invisible (a tracking failure) instead of read as still by the neighbours' points. The occlusion rule: an object hidden
 (by the hand, or carried out of sight) is invisible, keeps its last position, and counts against the
@@ -54,8 +54,8 @@ import numpy as np
 
 SCORING_SIZE = 256  # px: the square frame every video is scored in
 QUERY_RADIUS = 10.0  # px: the 3×3 query grid fits in this radius (corner points exactly on it)
-LK_QUERY_RADIUS = 5.0  # px: the LK stage's grid instead (the colour stage keeps the SPEC's, which moves rigidly
-#   with the region): the SPEC's corners, 10 px out, lie beside an object of 8–12 px (LIBERO's chocolate pudding,
+LK_QUERY_RADIUS = 5.0  # px: the LK stage's grid instead (the colour stage keeps the paper's, which moves rigidly
+#   with the region): the paper's corners, 10 px out, lie beside an object of 8–12 px (LIBERO's chocolate pudding,
 #   ManiSkill's pegs in the scoring frame), on still neighbours that stay visible while the object's own points
 #   are lost under the fingers, so a lifted object read as still. Measured on LIBERO's validation references
 #   (docs/validity.md, T4): moving objects detected (d > 10 or lost) 32 / 36 with 10 px, 35 with 3, 36 with 5,
@@ -76,7 +76,7 @@ MOTION_MAX = 10.0  # px: d above this means the object moved (S = 0)
 GATE_RATIO = 0.5  # the generated gate must reach this fraction of the reference gate
 GATE_MIN_REFERENCE = 20.0  # px: build time keeps an instance only if the reference gate reaches this
 TRACKED_RATIO = 0.5  # a generated rollout whose object is visible in fewer than this fraction of the frames in
-#   which the reference's is visible is a tracking failure (S = 0; SPEC §3 T4 counts tracking failures in the
+#   which the reference's is visible is a tracking failure (S = 0; spec §3.4 counts tracking failures in the
 #   mean). Without it an object that vanishes, or is carried away under the fingers, would keep its last
 #   centroid and pass: measured, the action-blind baseline (the source rollout: no distractor, target grasped
 #   or still at its original place) scored 75 on T4 without the rule.

@@ -1,4 +1,4 @@
-"""Timestamps and nearest-frame resampling (SPEC §4), and the temporally aligned MSE of T1 (SPEC §3)."""
+"""Timestamps and nearest-frame resampling (spec §4.1), and the temporally aligned MSE of T1 (spec §3.1)."""
 
 from __future__ import annotations
 
@@ -50,12 +50,12 @@ REEXPORT = "re-export it as an h264 mp4 (`wsp_eval.video.write_video` writes the
 LOSSLESS_FIX = ("save the model's frames losslessly: `wsp generate` and `wsp_eval.video.write_video` do (h264 RGB, "
                 "crf 0), as does `ffmpeg -i FRAMES -c:v libx264rgb -crf 0 -tune fastdecode seedK.mp4`; "
                 "re-encoding a lossy file losslessly keeps its codec noise, so export from the frames the model produced")
-"""The submission's encoding contract (SPEC §4 "Encoding of submissions"; docs/submission.md): every frame exactly as
+"""The submission's encoding contract (spec §4.7; docs/submission.md): every frame exactly as
 the model produced it. Lossy codecs and chroma subsampling add noise that T1 reads as action compression (the
 oracle as h264 yuv420p crf 23 falls from 99.9 to 43 on T1), so they are refused before decoding."""
 MAX_SIDE = 512
 """The largest width or height of a submitted video. The largest reference camera is 320×240 (RoboTwin;
-ManiSkill and LIBERO render 128×128, SPEC §1), T2/T3 compare flows at 160×120 and T4 tracks in 256², so more
+ManiSkill and LIBERO render 128×128, spec §2), T2/T3 compare flows at 160×120 and T4 tracks in 256², so more
 pixels score nothing; 512 admits the usual generation sizes (256², 512²) and bounds a decoded frame to
 768 KiB, so a video of a reference's horizon (a few hundred frames) stays a few hundred MB at most, where one
 1920×1080 frame is 6 MiB and an upload of 2,900 of them needed 24 GB."""

@@ -13,7 +13,7 @@ from wsp_data.platforms import PlatformKit, kit
 
 
 def rollout_problem(k: PlatformKit, qlimits: np.ndarray, ro) -> str | None:
-    """The common validity checks (SPEC §5) of a platform rollout, read the way its platform needs."""
+    """The common validity checks (spec §5) of a platform rollout, read the way its platform needs."""
     return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), k.joint_stream(ro),
                          qlimits, ro.actions, k.action_bounds, k.arm_joints)
 

@@ -1,9 +1,9 @@
-"""T1 Local action calibration (SPEC §3 T1).
+"""T1 Local action calibration (spec §3.1).
 
 Proposal: a verified expert source trajectory; one non-gripper action dimension, one direction, one
 window of `WINDOW` steps, two distinct magnitudes from `MAGNITUDES` in native units (ManiSkill: rad of a
 joint target; LIBERO: OSC units, ×0.05 m or ×0.5 rad per step), the smaller one "small". The triplet shares the scene seed, dimension, direction and window.
-Validation: both variants replayed unrendered first (task success + common validity, SPEC §5); only then
+Validation: both variants replayed unrendered first (task success + common validity, spec §5); only then
 all three are rendered, and the triplet is kept when all three rendered references succeed and
 0 < D(x⁰, xˢ) < D(x⁰, xˡ), D being the temporally aligned full-video MSE on the simulator's own frames.
 Stored per instance: D⁰ˢ, D⁰ˡ, r* = D⁰ˢ / D⁰ˡ and every perturbation parameter.

@@ -1,11 +1,11 @@
-"""T2 Global trajectory coverage (SPEC §3 T2): a receiver scene + the complete action stream of another task.
+"""T2 Global trajectory coverage (spec §3.2): a receiver scene + the complete action stream of another task.
 
 Proposal: the slot's receiver task and scene seed; a donor task drawn by the proposal RNG among the config's
 other tasks that start in the receiver's arm configuration (`compatible_donors`); the donor stream is the
 verified expert trajectory of the donor task at `donor_seed = seed + DONOR_SEED_OFFSET` (a seed of its own,
 so the donor scene is not laid out by the receiver's random numbers).
 Validation: the whole stream is executed from the receiver's reset state without rendering first
-(`replay_problem`: the common checks of SPEC §5 plus two kinds of unintended collision), then rendered, and
+(`replay_problem`: the common checks of spec §5 plus two kinds of unintended collision), then rendered, and
 kept only if RMFA can score it: at least one window with active robot pixels (`wsp_eval.flow`).
 Stored per instance: donor task and seed, the receiver–donor motion mismatch (`motion_mismatch`) and the
 number of scorable windows. Definitions and measurements: docs/t2.md; on LIBERO (OSC delta streams: every

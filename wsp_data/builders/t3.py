@@ -1,4 +1,4 @@
-"""T3 Action-source behaviour preservation (SPEC §3 T3).
+"""T3 Action-source behaviour preservation (spec §3.3).
 
 Slots come in groups of eight that share task, episode and scene seed, one per source: the scripted expert,
 five scripted operator models H1–H5, and an early and a late behaviour-
@@ -6,7 +6,7 @@ cloning policy checkpoint (the platform's `PlatformKit.t3_source`). Slot k belon
 `SOURCE_GROUPS[k % 8]` and task `tasks[g % len(tasks)]`.
 
 The group's scene seed is the first candidate `config.scene_seed(8·g, a)` (a = 0, 1, …) on which the expert
-succeeds and all eight streams replay validly without rendering (SPEC §5 common checks; successes and
+succeeds and all eight streams replay validly without rendering (spec §5 common checks; successes and
 failures of operators and policies are both kept) and RMFA can score every one (≥ 1 window with active robot
 pixels). Every slot of the group evaluates the same candidates in the same order (the outcome is cached per
 worker), so all eight land on the same seed; slot k's attempt a uses candidate a and renders only its own

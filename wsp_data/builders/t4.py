@@ -1,4 +1,4 @@
-"""T4 Interaction grounding (SPEC §3 T4): validated no-contact rollouts of three kinds, balanced by slot.
+"""T4 Interaction grounding (spec §3.4): validated no-contact rollouts of three kinds, balanced by slot.
 
 - distractor: one primitive from `PALETTE` (built by the scene loader, so segmentation ids of the task stay
   the same) is put where the task's target lay in a same-task donor episode (another seed); the original
@@ -181,7 +181,7 @@ class T4Builder(SuiteBuilder):
 
     # -- validation -----------------------------------------------------------------------------
     def violation(self, rig, kind: str, p: Proposal, ro) -> str | None:
-        """The first failed check of a rollout: common validity (SPEC §5), then the kind's rule."""
+        """The first failed check of a rollout: common validity (spec §5), then the kind's rule."""
         poses, contacts = ro.stack("object_poses"), ro.stack("contacts")
         if (why := rig.invalid(ro)):
             return why

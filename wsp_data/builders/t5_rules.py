@@ -1,4 +1,4 @@
-"""T5 acceptance rules (SPEC §3 T5): did the scripted primitive happen? Pure numpy on stored states.
+"""T5 acceptance rules (spec §3.5): did the scripted primitive happen? Pure numpy on stored states.
 
 Every rule reads only the evaluated object's pose sequence (T, 7: xyz + quaternion wxyz, as stored in
 `sim.object_poses`), its robot–object contact flags (T,) (`sim.contacts`) and the robot base's
@@ -14,7 +14,7 @@ definitions with the same 0.05 (here metres):
   at most 6 frames (0.3 s), none of them more than 6 frames after the object starts moving (a push keeps
   contact while the object moves; a tap has withdrawn).
 A platform may override a threshold for its scenes (`PlatformKit.t5_rule_thresholds`, keyword arguments of
-`check` / `passes`): LIBERO (push, pull, tap, drop; SPEC) has no rolling prop, its tap strikes the task's own low
+`check` / `passes`): LIBERO (push, pull, tap, drop; spec §3.5) has no rolling prop, its tap strikes the task's own low
 target (a bowl or a flat box), which slides and stops on its own, so its tap needs xy ≥ `tap_min_xy` = 0.015 m
 (push's threshold) under the same brief-contact conditions (measured: 0.026–0.047 m with 1–3 contact frames).
 LIBERO's tap script checks one more thing itself, from the hand's pose: that its withdrawal lifted the hand

@@ -1,4 +1,4 @@
-"""Common reference validity (SPEC §5), checked from simulator state only.
+"""Common reference validity (spec §5), checked from simulator state only.
 
 `check_rollout` returns None for a valid rollout or the name of the first failed check, which becomes a
 drop reason in the build report. Thresholds:

@@ -1,4 +1,4 @@
-"""Backends, found by name (SPEC §4): one registry per role, each with an offline CPU default. A registry
+"""Backends, found by name (spec §4.6): one registry per role, each with an offline CPU default. A registry
 entry is a factory `(BackendSpec) -> backend`; other distributions add some through the entry-point groups
 `worldsimprobe.flow`, `worldsimprobe.tracker` and `worldsimprobe.judge` (`wsp_eval.registry`).
 

@@ -1,4 +1,4 @@
-"""Optical-flow backends for RMFA (SPEC §4): OpenCV DIS (default, CPU, no weights) and DPFlow through
+"""Optical-flow backends for RMFA (spec §4.6): OpenCV DIS (default, CPU, no weights) and DPFlow through
 ptlflow with a local checkpoint (optional). A backend maps RGB samples on the 160×120 grid to the flows
 between consecutive samples, in pixels of that grid: `flows(samples, needed=None)`, where `needed` (one bool per
 pair) names the pairs RMFA will read (the others may be left zero)."""

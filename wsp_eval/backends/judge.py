@@ -1,4 +1,4 @@
-"""The T5 primitive judge contract (SPEC §3 T5, §4): what every judge backend sees and returns.
+"""The T5 primitive judge contract (spec §4.5): what every judge backend sees and returns.
 
 A judge sees `JUDGE_FRAMES` = 12 frames sampled uniformly over the generated clip (`sample_frames`), the
 frame-0 position of the evaluated object in the 256×256 scoring frame (the release stores it; every model

@@ -3,7 +3,7 @@ convolutional network trained on simulator clips of training-range scene seeds o
 exported to ONNX and run by OpenCV's `dnn` module on the CPU, without torch. Its agreement with the simulator is
 measured in docs/validity.md, Primitive recognition.
 
-It sees what SPEC §3 T5 lets a judge see: the 12 sampled frames and the evaluated object's frame-0 position.
+It sees what spec §4.5 lets a judge see: the 12 sampled frames and the evaluated object's frame-0 position.
 `judge_input` turns them into one (1, CHANNELS, SIDE, SIDE) float32 tensor, the same for training and judging:
 
 - every frame resized to 128×128 (the references' size), RGB in [0, 1];

@@ -1,4 +1,4 @@
-"""The optional VLM primitive judge (SPEC §4 Backends): a model served behind any OpenAI-compatible
+"""The optional VLM primitive judge (spec §4.6): a model served behind any OpenAI-compatible
 `POST {base_url}/chat/completions` endpoint (vLLM, Ollama), as the paper runs Qwen3-VL-8B: greedy decoding,
 12 frames, the eight primitive specifications, a strict JSON answer.
 

@@ -1,4 +1,4 @@
-"""The deterministic default primitive judge (SPEC §3 T5, §4 "primitive judge"): `RulesJudge`.
+"""The deterministic default primitive judge (spec §4.5, §4.6): `RulesJudge`.
 
 It sees only what the paper's VLM sees — the 12 sampled frames (RGB uint8, any size) and the evaluated object's
 frame-0 position in the 256×256 scoring frame — never the action stream, robot masks, simulator state or the

@@ -1,4 +1,4 @@
-"""Point-tracker backends for T4 (SPEC §4): colour region + pyramidal Lucas–Kanade with a forward–backward
+"""Point-tracker backends for T4 (spec §4.6): colour region + pyramidal Lucas–Kanade with a forward–backward
 check (default, CPU, no weights; `wsp_eval.tracking`) and TAPNext through DeepMind's `tapnet` package with a
 local checkpoint (optional). A backend prepares a video for tracking (`prepare`), tracks query points from
 frame 0 (`track`) and the evaluated object's query grid (`track_object`), returning `wsp_eval.tracking.Tracks`
@@ -43,7 +43,7 @@ class TAPNextTracker:
     """TAPNext / TAPNext++ (the paper's tracker) from a local checkpoint through `tapnet`'s PyTorch port.
 
     Needs `pip install tapnet` (with torch) and a checkpoint on disk; nothing is downloaded. Points are
-    visible where the model's visibility exceeds 0.5 (SPEC §3 T4); the anchored/chained distinction of the
+    visible where the model's visibility exceeds 0.5 (spec §4.4); the anchored/chained distinction of the
     LK backend does not apply (the model tracks every point from frame 0 itself)."""
 
     name = "tapnext"

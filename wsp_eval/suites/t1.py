@@ -1,4 +1,4 @@
-"""T1 Local action calibration score (SPEC §3 T1).
+"""T1 Local action calibration score (spec §3.1).
 
 For one generation seed: r = D(ĝ⁰, ĝˢ) / D(ĝ⁰, ĝˡ) with D the temporally aligned full-video MSE (the
 generated original is the timebase); r* = D⁰ˢ / D⁰ˡ from the simulator references (stored in the instance

@@ -1,4 +1,4 @@
-"""T2 Global trajectory coverage (SPEC §3 T2): RMFA (`wsp_eval.flow`) of the generated video against the
+"""T2 Global trajectory coverage (spec §3.2): RMFA (`wsp_eval.flow`) of the generated video against the
 cross-task reference, over their common duration; report cut by receiver–donor mismatch decile (rank by
 `mismatch`, ties by `instance_id`; decile 1 = smallest mismatch)."""
 

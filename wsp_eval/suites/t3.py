@@ -1,4 +1,4 @@
-"""T3 Action-source behaviour preservation (SPEC §3 T3): RMFA as in T2, reported per source group
+"""T3 Action-source behaviour preservation (spec §3.3): RMFA as in T2, reported per source group
 (`source_group`: expert, H1–H5, early policy, late policy) and overall."""
 
 from __future__ import annotations

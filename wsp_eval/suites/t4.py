@@ -1,4 +1,4 @@
-"""T4 Interaction grounding (SPEC §3 T4): track the evaluated object and the distal arm through the generated
+"""T4 Interaction grounding (spec §3.4): track the evaluated object and the distal arm through the generated
 video (`wsp_eval.tracking`, tracker backend); S = 100·1[g ≥ 0.5·g_ref]·1[tracked]·1[d ≤ 10 px] (tracked: the
 object is visible in at least half as many frames as the same tracker sees it in the reference); report by kind."""
 

@@ -49,7 +49,7 @@ class AlohaKit(PlatformKit):
     arm_joints = 12  # the state's and the joint stream's first 12 columns: left arm 6, right arm 6
     finger_dims = (12, 13)  # one finger slide per hand: 0.021 m closed … 0.057 m open
     finger_closed_below = 0.05  # m: a 4 cm cube stops the fingers at ≈ 0.0425 m
-    default_counts = {"t1": 419, "t2": 1575, "t3": 1000, "t4": 640, "t5": 8 * 233}  # RoboTwin's (SPEC §3)
+    default_counts = {"t1": 419, "t2": 1575, "t3": 1000, "t4": 640, "t5": 8 * 233}  # RoboTwin's (spec §3)
 
     # -- core ---------------------------------------------------------------------------------------------
     def tasks(self) -> dict:

@@ -1,4 +1,4 @@
-"""T5's scripted primitives on ALOHA (SPEC §3 T5), closed-loop in end-effector space like the experts
+"""T5's scripted primitives on ALOHA (spec §3.5), closed-loop in end-effector space like the experts
 (`experts.Script`: grip point, pitch, roll, gripper per arm, closed-form IK). Each continues a `Script` that
 replayed the expert's stream up to the branch step (`BranchScript`) and acts on the task's target with the arm
 the expert uses first on it (`ACTING_ARM`); the other arm holds its command (lifted to 15 cm first where it was

@@ -43,7 +43,7 @@ class LiberoKit(PlatformKit):
     action_bounds = (-1.0, 1.0)  # OSC commands beyond are clipped by the controller
     gripper_dim = 6
     gripper_open = -1.0
-    default_counts = {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000}  # paper Table S3 (SPEC §3)
+    default_counts = {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000}  # paper Table S3 (spec §3)
     rigs_per_worker = 2  # a LIBERO rig holds 1–2 GB (measured: +2.1 GB RSS for the first, +0.5–1.0 GB after
     #   closing, for each further one) and takes 3 s to create against ≈ 45 s per T5 slot: one per task (40
     #   tasks) would exhaust a machine's memory in a paper-size build

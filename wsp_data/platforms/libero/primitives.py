@@ -1,4 +1,4 @@
-"""T5's scripted primitives on LIBERO (SPEC §3 T5: push, pull, tap, drop), closed-loop in LIBERO's OSC action
+"""T5's scripted primitives on LIBERO (spec §3.5: push, pull, tap, drop), closed-loop in LIBERO's OSC action
 space on simulator state. Each continues a `PickPlaceScript` that replayed the expert's stream up to the
 branch step, and acts on the task's target.
 
@@ -11,7 +11,7 @@ branch step, and acts on the task's target.
 
 Push and tap act along the side with the most free room from the other objects. The room is weighed from
 movable objects only, so that side can lead the hand under a fixture (e.g. `KITCHEN_SCENE10`'s cabinet top),
-which then stops its lift: a hand left low beside the object at the end, what a push looks like and not SPEC's
+which then stops its lift: a hand left low beside the object at the end, what a push looks like and not spec §3.5's
 press-and-retract, and a push unlike every other task's. So each checks its own lift, which must raise the hand
 `MIN_RISE`; where it does not, the same scene is tried from the side with the next most room, and only when
 every side is stopped is the proposal dropped (`push_not_withdrawn`, `tap_not_withdrawn`).

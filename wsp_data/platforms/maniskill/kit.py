@@ -21,7 +21,7 @@ class ManiSkillKit(PlatformKit):
     action_bounds = None  # joint targets: the limit check reads them directly
     gripper_dim = 7
     gripper_open = 1.0
-    default_counts = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360}  # paper Table S3 (SPEC §3)
+    default_counts = {"t1": 1000, "t2": 1500, "t3": 750, "t4": 1000, "t5": 2360}  # paper Table S3 (spec §3)
 
     # -- core ---------------------------------------------------------------------------------------------
     def tasks(self) -> dict:

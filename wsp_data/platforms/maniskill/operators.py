@@ -1,4 +1,4 @@
-"""Scripted operator models H1–H5 for T3 (SPEC §3 T3: action-source behaviour preservation).
+"""Scripted operator models H1–H5 for T3 (spec §3.3: action-source behaviour preservation).
 
 A release must be buildable with nobody at the keyboard, so the five T3 "operators" are scripted models that
 imitate the expert: each runs the task's own expert solver (`experts.TASKS[task].solve`), but on an

@@ -1,4 +1,4 @@
-"""Scripted T5 interaction primitives (SPEC §3 T5) and the branching of an expert script.
+"""Scripted T5 interaction primitives (spec §3.5) and the branching of an expert script.
 
 `BranchScript` is a `SkillScript` that can carry extra scene actors (`PROPS`: knock-over's tall box and tap's
 ball, set beside the task's target by `prop_placement`), place actors after reset, and re-run an expert
