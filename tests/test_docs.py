@@ -170,6 +170,7 @@ SHELL_LANGUAGES = {"bash", "sh", "shell", "console", "zsh"}
 FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([\w+-]*)")
 ASSIGNMENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*=")
 PLACEHOLDER = re.compile(r"^<[^<>]+>$")  # <release>, <submission>: a path the reader fills in
+EXPANSION = re.compile(r"\$")  # $1, $RELEASE, ${N}: a value the shell fills in
 REDIRECT = re.compile(r"^\d*(?:>>?|<)(&\d+)?$")  # `>`, `2>`, `>&2`, `<`: the next token is its file
 REDIRECT_JOINED = re.compile(r"^\d*(?:>>?|<)\S+$")  # `>out.txt`, `2>/dev/null`, `2>&1`
 SEPARATOR = re.compile(r"^[;&|]+$")
@@ -246,14 +247,18 @@ def make_targets() -> set[str]:
 
 
 def _parse(parser, argv: list[str]) -> str | None:
-    """None when the CLI's parser accepts `argv`, else argparse's message."""
+    """None when the CLI's parser accepts `argv`, else argparse's message. A value argparse refuses is accepted when
+    it is a placeholder (<release>) or a shell expansion ($1): the reader or the shell fills it in."""
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
             parser.parse_args(argv)
     except SystemExit as e:
         if e.code not in (0, None):
-            return err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else f"exit {e.code}"
+            message = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else f"exit {e.code}"
+            filled_in = [a for a in argv if PLACEHOLDER.match(a) or EXPANSION.search(a)]
+            if not any(f"'{a}'" in message for a in filled_in):
+                return message
     return None
 
 
@@ -305,4 +310,5 @@ def test_command_checker_reads_shell_lines_as_a_shell_does():
     p = cli_parser()
     assert _parse(p, ["score", "<submission>", "--release", "<release>", "--out", "report"]) is None
     assert "invalid choice" in _parse(p, ["build", "--suite", "t9"])
+    assert _parse(p, ["build", "--suite", "$1", "--count", "$2"]) is None  # a shell function's arguments
     assert _parse(p, ["score", "sub", "--release", "r", "--out", "o", "--no-such-flag"]) is not None
