@@ -1,4 +1,4 @@
-"""Is a release's T4 (and T5) evaluated object what the camera sees at its projected centre? (docs/validity.md, T4)
+"""Is a release's T4 (and T5) evaluated object what the camera sees at its projected centre? (docs/validity.md, T4 tracker)
 
     .venv/bin/python benchmarks/centre_sight.py RELEASE [RELEASE ...] [--out FILE.json]
 

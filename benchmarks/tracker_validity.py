@@ -1,4 +1,4 @@
-"""The T4 tracker against simulator ground truth (docs/validity.md, T4): the evaluated object's true image
+"""The T4 tracker against simulator ground truth (docs/validity.md, T4 tracker): the evaluated object's true image
 position in every frame is its stored pose projected through the stored camera, so what the tracker reports can
 be checked on references whose object moves (T5) and on references whose object stays (T4).
 

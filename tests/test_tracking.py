@@ -241,7 +241,7 @@ def test_fingers_over_a_still_cube_do_not_move_it():
 def test_a_cube_lifted_under_fingers_moves_by_its_true_lift():
     """The fingers close over the cube's top 4 rows and lift it 12 px (1 px per frame): the visible part's
     centroid would read 10 px (2 px low); the fit places the whole cube: d = 12 (ALOHA's drops, lifted 12.5 px,
-    read 7–10 px by the visible part's centroid; docs/validity.md, T4)."""
+    read 7–10 px by the visible part's centroid; docs/validity.md, T4 tracker)."""
     n = 14
     path = lambda t: (CUBE_AT[0], CUBE_AT[1] - max(t - 1, 0))  # noqa: E731
     frames = colour_scene(n, path, hand_at_=lambda t: (path(t)[0], path(t)[1] - 7) if t else (200, 40),

@@ -28,7 +28,7 @@ whole query grid follows that region — visible in a frame when a region of the
 grid (radius 10 px) is wider than a ManiSkill cube (6–8 px in the scoring frame), so most query points sit on
 the table, and grey LK loses the object's own points as soon as the fingers close on it; the table points stay
 visible and still, and a carried-away object goes undetected (grey LK alone detects 68 % of true motions over
-10 px on ManiSkill, with 6 % false alarms; `docs/validity.md`, T4). Colour survives where grey texture does not:
+10 px on ManiSkill, with 6 % false alarms; `docs/validity.md`, T4 tracker). Colour survives where grey texture does not:
 a blue cube on orange wood, a grasped red cube between grey fingers. Where the colour is not distinct (textured or dark LIBERO objects, an
 object coloured like the robot) the points are tracked by LK as above, from a grid of half the paper's radius
 (`LK_QUERY_RADIUS`): on the object itself rather than on its neighbours, so that an object lost under the fingers
@@ -41,7 +41,7 @@ frame-0 shape (`occlusion_fit`; only where frame 0 shows the object whole: no ro
 lying on the fewest background pixels, where background is what still looks as it did in frame 0 or like the
 object's frame-0 surroundings, and anything else (a finger, its shadow) may be hiding the object. Why: the
 visible part's centroid slides away from the occluder — measured on ALOHA, a cube under closing fingers read
-4 px off while still and a 12.5 px lift read 7–10 px (`docs/validity.md`, T4).
+4 px off while still and a 12.5 px lift read 7–10 px (`docs/validity.md`, T4 tracker).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ LK_QUERY_RADIUS = 5.0  # px: the LK stage's grid instead (the colour stage keeps
 #   with the region): the paper's corners, 10 px out, lie beside an object of 8–12 px (LIBERO's chocolate pudding,
 #   ManiSkill's pegs in the scoring frame), on still neighbours that stay visible while the object's own points
 #   are lost under the fingers, so a lifted object read as still. Measured on LIBERO's validation references
-#   (docs/validity.md, T4): moving objects detected (d > 10 or lost) 32 / 36 with 10 px, 35 with 3, 36 with 5,
+#   (docs/validity.md, T4 tracker): moving objects detected (d > 10 or lost) 32 / 36 with 10 px, 35 with 3, 36 with 5,
 #   35 with 7; no false alarm on still objects with any of them.
 LK_WINDOW = 15  # px: LK window side, about an object's size in the scoring frame plus its surroundings
 CHAINED_LEVELS = 3  # pyramid levels above full size for chained points: captures ≈ 15·2³/2 = 60 px per frame

@@ -56,7 +56,7 @@ MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object 
 REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
 CENTRE_SIGHT_MAX = 1.5  # native px: the evaluated object's nearest visible pixel lies at most this far from its
 #   projected centre at frame 0 (the centre's own pixel or a neighbour, diagonals included). Beyond it the query
-#   grid sits on whatever hides the object (a LIBERO milk carton behind the juice carton: docs/validity.md, T4)
+#   grid sits on whatever hides the object (a LIBERO milk carton behind the juice carton: docs/validity.md, T4 tracker)
 
 
 @dataclass
@@ -269,7 +269,7 @@ def passes_when_carried(src, k: int, pixel: np.ndarray, mask0: np.ndarray, gate:
     same first frame along the same arm path: exactly what a model that hallucinates contact would generate.
     Where the simulator moved the target more than MOTION_MAX px in the scoring frame, T4 must score that video 0;
     when it scores 100 instead (the tracker lost a small dark object under the fingers and kept following a still
-    neighbour: LIBERO's chocolate pudding, docs/validity.md, T4), the instance cannot tell the two apart. Returns
+    neighbour: LIBERO's chocolate pudding, docs/validity.md, T4 tracker), the instance cannot tell the two apart. Returns
     the evidence of such a miss, else None."""
     size = frame_size(src.observations[0].rgb)
     truth = np.stack([project(o.object_poses[k, :3], src.intrinsic, src.extrinsic, size) for o in src.observations])
