@@ -232,14 +232,12 @@ def render(name: str, current: str | None) -> str:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--check", action="store_true", help="change nothing; exit 1 if a card differs from the kits")
-    p.add_argument("platforms", nargs="*", help="default: every registered platform")
+    p.add_argument("platforms", nargs="*", help="default: every built-in platform (`TASK_SOURCES`)")
     args = p.parse_args(argv)
     block_simulators()
     sys.path.insert(0, str(ROOT))
-    from wsp_data.platforms import KITS
-
     stale = []
-    for name in args.platforms or list(KITS):
+    for name in args.platforms or list(TASK_SOURCES):
         path = CARDS / f"{name}.md"
         current = path.read_text() if path.exists() else None
         card = render(name, current)
