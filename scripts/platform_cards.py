@@ -112,7 +112,13 @@ def _summary(kit) -> str:
     if not doc.strip():
         doc = (inspect.getmodule(cls).__doc__ or "").strip().split("\n\n")[0]
     text = " ".join(inspect.cleandoc(doc).split())
-    return re.sub(r"\s*\(docs/[\w./-]+\)", "", text)
+    return _clean(re.sub(r"\s*\(docs/[\w./-]+\)", "", text))
+
+
+def _clean(text: str) -> str:
+    """Text from a kit without the dates its reasons may carry (a card states what is true now)."""
+    text = re.sub(r"\s*\(\d{4}-\d{2}-\d{2}\)", "", text)
+    return re.sub(r",\s*\d{4}-\d{2}-\d{2}", "", text)
 
 
 def _code(names) -> str:
@@ -198,7 +204,7 @@ def generated(name: str) -> str:
         from wsp_data.builders.t4 import KINDS
 
         lines += [f"**T4** kinds {_code(KINDS)}: the kit picks each kind's tasks from the task specs when a build "
-                  f"starts (a kind left without a task is refused, needing {kit.t4_needs(['false_contact'])}).", ""]
+                  f"starts (a kind left without a task is refused, needing {_clean(kit.t4_needs(['false_contact']))}).", ""]
     else:
         lines += ["**T4** tasks per kind:", "", "| kind | tasks |", "|---|---|"]
         lines += [f"| `{k}` | {_code(v) if v else '—'} |" for k, v in kinds.items()]
@@ -209,7 +215,7 @@ def generated(name: str) -> str:
     if per_primitive is None:
         lines += [f"**T5** primitives {_code(primitives)}, balanced by slot; the kit picks each primitive's tasks "
                   f"from the task specs when a build starts (a primitive left without a task is refused, needing "
-                  f"{kit.t5_needs()})."]
+                  f"{_clean(kit.t5_needs())})."]
     else:
         lines += ["**T5** primitives, balanced by slot, with their tasks:", "", "| primitive | tasks |", "|---|---|"]
         lines += [f"| `{p}` | {_code(per_primitive.get(p, ())) or '—'} |" for p in primitives]
