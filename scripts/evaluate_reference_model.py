@@ -1,5 +1,5 @@
 """Score the reference world model beside the oracle, static and action-blind baselines on a release, and draw
-the figures of `docs/reference_model.md`.
+the figures of `docs/guides/reference-model.md`.
 
     .venv/bin/python scripts/evaluate_reference_model.py --release refeval --out refeval-scores
     # writes <out>/<model>/ (submissions), <out>/reports/<model>/ (reports), <out>/table.md (scores with 95 % CIs

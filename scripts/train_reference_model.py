@@ -7,7 +7,7 @@
 
 Deterministic: the same split, recipe and torch version on the same thread count give the same weights.
 Resumable: run the same command again after an interruption (the build resumes, training restarts from its
-last saved state). `docs/reference_model.md` has the recipe, the data and what it scores.
+last saved state). `docs/guides/reference-model.md` has the recipe, the data and what it scores.
 """
 
 from __future__ import annotations

@@ -289,7 +289,7 @@ def test_oracle_scores_full_marks(aloha_release, tmp_path):
 
 def test_mask_baseline_writes_a_valid_submission_at_320x240(aloha_release, tmp_path):
     """The baseline whose region depends on the robot mask's shape and the frame's sides (the robot's shape
-    moved aside), on a non-square camera; every baseline's scores on this release are in docs/aloha.md."""
+    moved aside), on a non-square camera (`wsp calibrate` scores every baseline, docs/scoring.md)."""
     name = "background_corrupt"
     from wsp_eval.baselines import write_baseline
     from wsp_eval.submission import validate

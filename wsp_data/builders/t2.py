@@ -8,8 +8,8 @@ Validation: the whole stream is executed from the receiver's reset state without
 (`replay_problem`: the common checks of spec §5 plus two kinds of unintended collision), then rendered, and
 kept only if RMFA can score it: at least one window with active robot pixels (`wsp_eval.flow`).
 Stored per instance: donor task and seed, the receiver–donor motion mismatch (`motion_mismatch`) and the
-number of scorable windows. Definitions and measurements: docs/t2.md; on LIBERO (OSC delta streams: every
-donor is compatible, arm motion = the commanded hand path, the LIBERO kit's `blocked`): docs/libero.md.
+number of scorable windows. Definitions and measurements: docs/suites/t2.md; on LIBERO (OSC delta streams: every
+donor is compatible, arm motion = the commanded hand path, the LIBERO kit's `blocked`): docs/platforms/libero.md.
 """
 
 from __future__ import annotations

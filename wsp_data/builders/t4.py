@@ -16,10 +16,10 @@ centre in frame 0), and tracked with `wsp_eval.tracking`: the reference gate mus
 must also be one T4 can fail: its source rollout (the expert carrying the target away along the same arm path,
 from the same first frame), scored as a submission, must score 0 wherever the simulator moved the target more
 than `MOTION_MAX` px.
-Thresholds and task choices are documented in docs/t4.md. Which tasks serve which kind, and how a scene is
+Thresholds and task choices are documented in docs/suites/t4.md. Which tasks serve which kind, and how a scene is
 edited (what a distractor is, where objects may go), is the platform's: `PlatformKit.t4_kind_tasks` and
 `t4_rig` (on LIBERO a BDDL scene cannot gain a body, so the distractor is one of the scene's own movable
-objects the task does not use, relocated; docs/libero.md). The shared geometry helpers are here.
+objects the task does not use, relocated; docs/platforms/libero.md). The shared geometry helpers are here.
 """
 
 from __future__ import annotations

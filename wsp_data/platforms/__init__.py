@@ -5,7 +5,7 @@ other distributions add theirs as `PlatformKit` objects through the entry-point 
 
 A `PlatformKit` (`interface.py`) is everything suite builders need from a platform, hook by hook (tasks, expert,
 renderer, the streams the validity checks read, T3 sources, T4 scene edits, T5 primitives), and what the release
-stores about it (`info`). docs/adding_a_platform.md describes how to write one.
+stores about it (`info`). docs/guides/adding-a-platform.md describes how to write one.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Survey the scripted experts: per task, how many seeds script into a replay-verified success, how long the
 trajectories are and what one costs.
 
-    python -m wsp_data.sources.survey [--platform maniskill|libero] [--seeds 20] [--tasks …] [--out docs/experts.md]
+    python -m wsp_data.sources.survey [--platform maniskill|libero] [--seeds 20] [--tasks …] [--out experts.md]
 
 prints a Markdown table (and writes it to `--out`). Every seed goes through the platform's expert source:
 on ManiSkill, script under `pd_ee_pose`, replay under `pd_joint_pos`, keep only if the replay ends in task

@@ -1,7 +1,7 @@
 """The ALOHA kit: `PlatformKit` hooks for the bimanual ALOHA (two ViperX 300 arms) on plain MuJoCo, with
 RoboTwin 2.0's action interface (native stream: 14-D absolute joint targets, 6 per arm + a normalised gripper
 each). It stands in for RoboTwin's embodiment class (dual arm, head camera), whose assets no machine here can
-download; it is not RoboTwin (docs/aloha.md).
+download; it is not RoboTwin (docs/platforms/aloha.md).
 
 Every hook imports its simulator modules on call, so importing this module (and registering the kit) imports
 no simulator.

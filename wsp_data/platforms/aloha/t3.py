@@ -214,7 +214,7 @@ class AlohaPolicySource(BCPolicySource):
     PLATFORM = "aloha"
     TASKS = T3_TASKS
     TRAIN_SCRIPT = TRAIN_SCRIPT
-    DOCS = "docs/aloha.md"
+    DOCS = "docs/guides/policies.md"
     checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):

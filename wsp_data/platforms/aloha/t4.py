@@ -1,4 +1,4 @@
-"""T4 on ALOHA: the task rig that proposes the three kinds' scene edits (docs/aloha.md).
+"""T4 on ALOHA: the task rig that proposes the three kinds' scene edits (docs/platforms/aloha.md).
 
 - distractor: the scene's spare yellow cube (parked out of sight) placed on the table, in view, clear of both
   arms' swept region; the expert's stream must still succeed around it.

@@ -1,5 +1,5 @@
 """T5 on ALOHA: which tasks serve which primitive, and the task rig whose branch replays the expert's stream up
-to the branch step and lets `primitives` continue closed-loop with the acting arm (docs/aloha.md). Knock-over
+to the branch step and lets `primitives` continue closed-loop with the acting arm (docs/platforms/aloha.md). Knock-over
 acts on a prop (`primitives.PROP`) that the rig's scene adds beside the target."""
 
 from __future__ import annotations

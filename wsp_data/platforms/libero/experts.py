@@ -3,7 +3,7 @@ driven by simulator state (object geometry and poses), for every task whose BDDL
 `(On obj target)` or `(In obj region)`.
 
 `TASKS` is the registry of the benchmark's 40 LIBERO tasks (chosen by measured scripted success: see
-docs/libero.md). `LiberoExpertSource(task).trajectory(seed)` scripts the task on an unrendered env and returns
+docs/guides/experts.md). `LiberoExpertSource(task).trajectory(seed)` scripts the task on an unrendered env and returns
 the OSC stream only if it succeeds; a replay of that stream from the same scene is bit-identical (tested), so
 every returned stream is a verified success.
 """
@@ -247,7 +247,7 @@ class OutOfTime(Exception):
 
 
 # The benchmark's 40 LIBERO tasks: every single-goal pick-and-place task of libero_object, libero_spatial and
-# libero_goal that the script solves in ≥ 7 of 10 scenes, then libero_90's in its order (docs/libero.md lists
+# libero_goal that the script solves in ≥ 7 of 10 scenes, then libero_90's in its order (docs/guides/experts.md lists
 # all 97 candidates with their measured success).
 BENCHMARK_TASKS: tuple[str, ...] = (
     "libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",

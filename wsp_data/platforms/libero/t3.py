@@ -152,7 +152,7 @@ class LiberoPolicySource(BCPolicySource):
     PLATFORM = "libero"
     TASKS = T3_TASKS
     TRAIN_SCRIPT = "scripts/train_libero_policies.py"
-    DOCS = "docs/libero.md"
+    DOCS = "docs/guides/policies.md"
     checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):

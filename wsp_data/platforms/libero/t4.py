@@ -13,7 +13,7 @@ from wsp_data.builders.t4 import (
 from wsp_data.schema import MAX_OBJECTS
 
 # LIBERO scenes are compiled from BDDL, so a body cannot be added without changing the model: its distractor
-# is one of the scene's own movable objects that the task does not involve, relocated (docs/libero.md).
+# is one of the scene's own movable objects that the task does not involve, relocated (docs/platforms/libero.md).
 LIBERO_SUPPORT_TOL = 0.01  # m: a LIBERO distractor candidate rests on the same surface as the task's target
 LIBERO_AROUND = 0.25  # m: LIBERO placements are drawn this far around the task objects' xy box
 

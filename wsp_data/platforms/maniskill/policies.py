@@ -2,7 +2,7 @@
 
 For each T3 task a small MLP was trained (`scripts/train_policies.py`, CPU, fixed seeds) on replay-verified
 scripted expert trajectories of training seeds (`ExpertSource`) plus noise-injected re-executions of them,
-and two checkpoints were kept: an *early* one (10% of training) and the *late* (final) one; docs/policies.md
+and two checkpoints were kept: an *early* one (10% of training) and the *late* (final) one; docs/guides/policies.md
 has their measured success. `PolicySource(task, stage)` loads
 `wsp_data/platforms/maniskill/checkpoints/<task>_<stage>.pt` and runs the policy closed-loop in its own state-only
 `ManiSkillPlatform`; the returned stream is a plain `pd_joint_pos` stream that `ManiSkillPlatform.replay`
@@ -96,7 +96,7 @@ class PolicySource(BCPolicySource):
     PLATFORM = "maniskill"
     TASKS = T3_TASKS
     TRAIN_SCRIPT = TRAIN_SCRIPT
-    DOCS = "docs/policies.md"
+    DOCS = "docs/guides/policies.md"
     checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):

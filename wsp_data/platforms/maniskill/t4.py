@@ -14,7 +14,7 @@ from wsp_data.builders.t4 import (
 from wsp_data.platforms import kit
 from wsp_data.schema import MAX_OBJECTS, SEED_BASE, SEED_SPAN
 
-# Which tasks serve which kind (docs/t4.md): false contact needs an expert that grasps the target; spatial
+# Which tasks serve which kind (docs/suites/t4.md): false contact needs an expert that grasps the target; spatial
 # proximity needs a single dominant target whose removal leaves the robot nothing else to touch.
 KIND_TASKS: dict[str, tuple[str, ...]] = {
     "distractor": ("PickCube", "PushCube", "PullCube", "StackCube", "PlaceSphere", "LiftPegUpright", "RollBall"),
