@@ -128,6 +128,26 @@ def test_no_path_outside_the_repository():
     assert not found, "paths outside the repository:\n" + "\n".join(found)
 
 
+DOCS_PATH = re.compile(r"(?<![\w./-])docs/[A-Za-z0-9_./-]*[A-Za-z0-9_-]\.(?:md|py|png|jpe?g|svg|gif|html)\b")
+LOG_CITATION = re.compile(r"(?<![\w./-])" + re.escape(LOG_DIR))
+
+
+def test_cited_docs_paths_exist():
+    """Every `docs/…` file named in a tracked file (a docstring's pointer, a README link) exists, and no code or
+    test cites the experiment logs."""
+    missing, logs = [], []
+    for path in tracked():
+        if path.startswith(LOG_DIR) or path == THIS or (body := text(path)) is None:
+            continue
+        for lineno, line in enumerate(body.splitlines(), 1):
+            missing += [f"{path}:{lineno}: {m.group(0)}" for m in DOCS_PATH.finditer(line)
+                        if not (ROOT / m.group(0)).exists()]
+            if path.endswith((".py", ".sh")) and LOG_CITATION.search(line):
+                logs.append(f"{path}:{lineno}: {line.strip()[:120]}")
+    assert not missing, "docs files named but not in the repository:\n" + "\n".join(missing)
+    assert not logs, "code or tests citing the experiment logs (history only):\n" + "\n".join(logs)
+
+
 # -- the README and the reading path ---------------------------------------------------------------------------
 def test_readme_is_a_short_usage_manual():
     lines = (ROOT / "README.md").read_text().splitlines()
