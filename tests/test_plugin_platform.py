@@ -103,7 +103,7 @@ class PlanarWorld:
         obs = Observation(qpos, np.array([*hand, 0.05, 1, 0, 0, 0], np.float32), poses, contacts,
                           bool(np.linalg.norm(self.box - self.goal) < GOAL_TOL))
         if self.render:
-            obs.rgb, obs.mask = self._draw()
+            obs.rgb, obs.mask, obs.objects = self._draw()
         return obs
 
     # -- camera ----------------------------------------------------------------------------------------------
@@ -122,14 +122,16 @@ class PlanarWorld:
         v = -FOCAL * (xy[1] - CAM_C[1]) / CAM_Z + IMAGE_SIZE / 2
         return int(round(u * 16)), int(round(v * 16))
 
-    def _draw(self) -> tuple[np.ndarray, np.ndarray]:
+    def _draw(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         rgb = np.full((IMAGE_SIZE, IMAGE_SIZE, 3), (176, 164, 150), np.uint8)
         mask = np.zeros((IMAGE_SIZE, IMAGE_SIZE), np.uint8)
+        objects = np.zeros((IMAGE_SIZE, IMAGE_SIZE), np.uint8)
         px = FOCAL / CAM_Z  # px per m
         cv2.circle(rgb, self._px(self.goal), int(GOAL_TOL * px * 16), (90, 200, 90), 2, cv2.LINE_AA, 4)
         corners = np.array([self._px(self.box + s) for s in np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * BOX_H],
                            np.int32)
         cv2.fillPoly(rgb, [corners], (40, 60, 220), cv2.LINE_AA, 4)
+        cv2.fillPoly(objects, [corners], 1, cv2.LINE_8, 4)
         elbow, hand = fk(self.q)
         base, e, h = self._px((0.0, 0.0)), self._px(elbow), self._px(hand)
         for img, colour, aa in ((rgb, (235, 235, 240), cv2.LINE_AA), (mask, 1, cv2.LINE_8)):
@@ -137,7 +139,8 @@ class PlanarWorld:
             cv2.line(img, e, h, colour, 4, aa, 4)
         cv2.circle(rgb, h, int(HAND_R * px * 16), (30, 30, 30), -1, cv2.LINE_AA, 4)
         cv2.circle(mask, h, int(HAND_R * px * 16), 2, -1, cv2.LINE_8, 4)
-        return rgb, mask
+        objects[mask > 0] = 0  # the arm is drawn over the box
+        return rgb, mask, objects
 
     # -- replay ----------------------------------------------------------------------------------------------
     def replay(self, seed: int, actions, placements=None) -> Rollout:

@@ -179,16 +179,16 @@ def test_plan_balances_kinds_over_eligible_tasks():
 
 
 def test_masks_read_by_row_group_match_a_file_without_statistics(release, rows, tmp_path):
-    """Scoring reads one episode's row group of `robot_masks.parquet`, found by its `episode_index` statistics; a
+    """Scoring reads one episode's row group of `masks.parquet`, found by its `episode_index` statistics; a
     masks file without statistics (all episodes in one row group) is read whole and gives the same masks."""
     import shutil
 
     src = release / "t4_maniskill"
     plain = tmp_path / "t4_maniskill"
     shutil.copytree(src / "meta", plain / "meta")
-    table = pq.read_table(src / "robot_masks.parquet")
-    pq.write_table(table, plain / "robot_masks.parquet", write_statistics=False)
-    assert pq.ParquetFile(src / "robot_masks.parquet").metadata.num_row_groups > 1
+    table = pq.read_table(src / "masks.parquet")
+    pq.write_table(table, plain / "masks.parquet", write_statistics=False)
+    assert pq.ParquetFile(src / "masks.parquet").metadata.num_row_groups > 1
     for e in sorted({i for r in rows for i in r["episode_indices"]}):
         for first in (True, False):
             np.testing.assert_array_equal(reference_masks(src, e, first), reference_masks(plain, e, first))

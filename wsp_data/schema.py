@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build side and tests import them from here)
     BUILD_REPORT, CARD, CODEBASE_VERSION, CONFIG_NAME, CROISSANT, DEFAULT_RELEASE_NAME, EPISODE_COLUMNS, EPISODE_ID,
     CONTACTS_KEY, FPS, IMAGE_SIZE, INSTANCE_ID, INSTANCES, LOG_DIR, MASK_COLUMN, MAX_OBJECTS, OBJECT_POSES_KEY,
-    RELEASE_JSON, ROBOT_MASKS, SOURCE_ROLE, STAGING_DIR, SUITES,
+    MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR, SUITES,
 )
 
 # ManiSkill's native streams (SPEC §2): the platform module imports these, never the reverse.
@@ -73,7 +73,7 @@ def frame_features(info: PlatformInfo) -> dict:
     observation at t and the action applied after it; the last frame's action repeats the previous one and is
     never executed. `action` is the platform's native stream; the other stream (`alt_action_key`) is stored
     beside it. Policy inputs (`observation.*`: the camera, joint state, end-effector pose) hold no padding and
-    no NaN; simulator ground truth is under `sim.*` and the robot masks in ROBOT_MASKS, outside the features."""
+    no NaN; simulator ground truth is under `sim.*` and the label masks in MASKS, outside the features."""
     img = (info.height, info.width, 3)
     hwc = ["height", "width", "channels"]
     return {

@@ -36,7 +36,8 @@ class RolloutArrays:
     role: str
     seed: int
     rgb: np.ndarray
-    mask: np.ndarray
+    mask: np.ndarray  # robot labels per frame
+    objects: np.ndarray  # object labels per frame (`Observation.objects`)
     qpos: np.ndarray
     tcp_pose: np.ndarray
     object_poses: np.ndarray
@@ -49,7 +50,7 @@ class RolloutArrays:
 
     @classmethod
     def from_rollout(cls, role: str, ro: Rollout) -> RolloutArrays:
-        return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("qpos"), ro.stack("tcp_pose"),
+        return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("objects"), ro.stack("qpos"), ro.stack("tcp_pose"),
                    ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
                    ro.alt_actions, ro.intrinsic, ro.extrinsic)
 

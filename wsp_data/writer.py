@@ -1,6 +1,6 @@
 """Assemble staged slots into one config of a release: a LeRobot v3.0 dataset written through lerobot's
 own API (near-lossless h264 yuv444p crf 0 video), `wsp.*` episode columns in its episode table,
-`robot_masks.parquet` (PNG label masks, outside LeRobot's features) and `instances.parquet` (one row per
+`masks.parquet` (PNG robot and object label masks, outside LeRobot's features) and `instances.parquet` (one row per
 instance).
 
 Writes are deterministic (same staged input → byte-identical files, whatever the number of workers) and atomic
@@ -11,7 +11,7 @@ file per episode here, and `_pack_videos` joins them into files of LeRobot's def
 
 Parallel where it can be: `workers` processes encode episodes ahead of the writer (`encode_episode`: the video
 and its image statistics by LeRobot's own streaming encoder, `StreamingVideoEncoder`, on one x264 thread; the
-robot masks' PNGs). The writer process (LeRobot's frame table, episode metadata and running statistics) stays
+label masks' PNGs). The writer process (LeRobot's frame table, episode metadata and running statistics) stays
 serial, as LeRobot writes its dataset files in episode order; it takes the finished videos through LeRobot's
 streaming-encoder interface (`_AheadVideos`).
 """
@@ -36,7 +36,8 @@ import pyarrow.parquet as pq
 
 from wsp_data.platforms import kit
 from wsp_data.schema import (
-    CONTACTS_KEY, EPISODE_ID, INSTANCES, MASK_COLUMN, OBJECT_POSES_KEY, ROBOT_MASKS, SOURCE_ROLE, PlatformInfo,
+    CONTACTS_KEY, EPISODE_ID, INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, OBJECT_POSES_KEY, SOURCE_ROLE,
+    PlatformInfo,
     frame_features,
 )
 from wsp_data.staging import RolloutArrays, SlotRecord, ordered_ahead
@@ -88,7 +89,7 @@ def write_config(config_dir: Path, config: str, platform: str,
     ahead = ds.writer._streaming_encoder = _AheadVideos(info.video_key)
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
-    with (contextlib.closing(_MaskWriter(tmp / ROBOT_MASKS)) as masks,  # closed also when a step below raises
+    with (contextlib.closing(_MaskWriter(tmp / MASKS)) as masks,  # closed also when a step below raises
           _encoder(info.fps, tmp, workers) as encode):
         for record, rollouts, encoded in ordered_ahead(encode, instances, workers):
             row = dict(record.row)
@@ -100,7 +101,7 @@ def write_config(config_dir: Path, config: str, platform: str,
                     for frame in _frames(r, row["instruction"], info):
                         ds.add_frame(frame)
                     ds.save_episode(parallel_encoding=False)
-                masks.add(index, e.mask_pngs)
+                masks.add(index, e.mask_pngs, e.object_pngs)
                 indices.append(index)
                 episode_rows.append({
                     "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
@@ -140,17 +141,18 @@ def write_config(config_dir: Path, config: str, platform: str,
 @dataclass(frozen=True)
 class Encoded:
     """One episode encoded ahead of the writer: its mp4 (alone in a temporary folder), LeRobot's per-channel
-    statistics of its frames, and its label masks as PNG files (`robot_masks.parquet`'s cells)."""
+    statistics of its frames, and its robot and object label masks as PNG files (`masks.parquet`'s cells)."""
 
     video: Path
     stats: dict
     mask_pngs: list[bytes]
+    object_pngs: list[bytes]
 
 
-def encode_episode(rgb: np.ndarray, mask: np.ndarray, fps: int, folder: Path) -> Encoded:
+def encode_episode(rgb: np.ndarray, mask: np.ndarray, objects: np.ndarray, fps: int, folder: Path) -> Encoded:
     """Encode one episode (runs in a worker process): the video by LeRobot's streaming encoder with the reference
     codec on one x264 thread (the same bytes in any process), into a new temporary folder under `folder`, and the
-    masks as PNGs."""
+    label masks as PNGs."""
     import av
     from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.video_utils import StreamingVideoEncoder
@@ -172,7 +174,7 @@ def encode_episode(rgb: np.ndarray, mask: np.ndarray, fps: int, folder: Path) ->
         Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
         return buf.getvalue()
 
-    return Encoded(path, stats, [png(m) for m in mask])
+    return Encoded(path, stats, [png(m) for m in mask], [png(m) for m in objects])
 
 
 class _AheadVideos:
@@ -206,7 +208,7 @@ def _encoder(fps: int, folder: Path, workers: int):
     pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn")) if workers > 1 else None
 
     def episode(r: RolloutArrays) -> Encoded:
-        args = (r.rgb, r.mask, fps, folder)
+        args = (r.rgb, r.mask, r.objects, fps, folder)
         return pool.submit(encode_episode, *args).result() if pool else encode_episode(*args)
 
     def encode(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[Encoded]]:
@@ -221,21 +223,22 @@ def _encoder(fps: int, folder: Path, workers: int):
 
 
 class _MaskWriter:
-    """`robot_masks.parquet`, one row per frame in LeRobot's global frame order, written an episode at a time."""
+    """`masks.parquet`, one row per frame in LeRobot's global frame order, written an episode at a time."""
 
     SCHEMA = pa.schema([("index", pa.int64()), ("episode_index", pa.int64()), ("frame_index", pa.int64()),
-                        (MASK_COLUMN, pa.binary())])
+                        (MASK_COLUMN, pa.binary()), (OBJECT_MASK_COLUMN, pa.binary())])
 
     def __init__(self, path: Path):
         self.writer = pq.ParquetWriter(path, self.SCHEMA)
         self.next_index = 0
 
-    def add(self, episode_index: int, pngs: list[bytes]) -> None:
+    def add(self, episode_index: int, pngs: list[bytes], object_pngs: list[bytes]) -> None:
         n = len(pngs)
         self.writer.write_table(pa.table({
             "index": np.arange(self.next_index, self.next_index + n, dtype=np.int64),
             "episode_index": np.full(n, episode_index, dtype=np.int64), "frame_index": np.arange(n, dtype=np.int64),
-            MASK_COLUMN: pa.array(pngs, pa.binary())}, schema=self.SCHEMA))  # one row group per episode
+            MASK_COLUMN: pa.array(pngs, pa.binary()),
+            OBJECT_MASK_COLUMN: pa.array(object_pngs, pa.binary())}, schema=self.SCHEMA))  # one row group per episode
         self.next_index += n
 
     def close(self) -> None:

@@ -58,7 +58,7 @@ def sample_times(duration: float) -> np.ndarray:
     return np.arange(int(np.floor(duration * EVAL_FPS + 1e-9)) + 1) / EVAL_FPS
 
 
-def _sample_indices(num_frames: int, fps: float, duration: float | None) -> np.ndarray:
+def sample_indices(num_frames: int, fps: float, duration: float | None) -> np.ndarray:
     """Frame index nearest to each 5 Hz sample time (duration defaults to the whole clip)."""
     own = clip_duration(num_frames, fps)
     if duration is None:
@@ -91,7 +91,7 @@ def video_flows(video: np.ndarray, fps: float, duration: float | None = None, ba
     (default: the whole clip), by `backend` (default DIS). Used for both the reference and a generated video.
     `needed` (K,) bool: compute only those flows, the others are zero (a generated video's flows where the
     reference's active set is empty, `active_flows`, which RMFA never reads)."""
-    idx = _sample_indices(len(video), fps, duration)
+    idx = sample_indices(len(video), fps, duration)
     samples = _rgb_grid(np.asarray(video)[idx])
     if needed is not None and len(needed) != max(len(samples) - 1, 0):
         raise ValueError(f"{len(needed)} needed flags for {max(len(samples) - 1, 0)} flows")
@@ -104,7 +104,7 @@ def reference_flows(video: np.ndarray, labels: np.ndarray, fps: float, duration:
     (0 not robot, 1 arm, 2 wrist/hand/fingers; robot = label > 0)."""
     if len(labels) != len(video):
         raise ValueError(f"{len(labels)} masks for {len(video)} frames")
-    idx = _sample_indices(len(video), fps, duration)
+    idx = sample_indices(len(video), fps, duration)
     robot = _robot_grid(np.asarray(labels)[idx])
     return ReferenceFlows((backend or DISFlow()).flows(_rgb_grid(np.asarray(video)[idx])), robot[:-1] | robot[1:])
 

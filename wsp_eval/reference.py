@@ -1,5 +1,5 @@
 """Read reference rollouts from a release without LeRobot's dataloader or a simulator: episode rows, the
-reference video segment of an episode inside its shared v3.0 video file, and the robot label masks."""
+reference video segment of an episode inside its shared v3.0 video file, and the robot and object label masks."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ import numpy as np
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from wsp_eval.release_format import FIRST_FRAME, MASK_COLUMN, ROBOT_MASKS
+from wsp_eval.release_format import BENCHMARK_VERSION, FIRST_FRAME, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN
 from wsp_eval.video import VideoError
 
 
@@ -127,24 +127,35 @@ def reference_frames(config_dir: Path, episode_index: int) -> np.ndarray:
 def reference_masks(config_dir: Path, episode_index: int, first_only: bool = False) -> np.ndarray:
     """The robot label masks of one episode (length, H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers; with
     `first_only`, frame 0's alone (1, H, W)."""
+    return _label_images(Path(config_dir), episode_index, MASK_COLUMN, first_only)
+
+
+def reference_object_masks(config_dir: Path, episode_index: int) -> np.ndarray:
+    """The object label masks of one episode (length, H, W) uint8: k + 1 where object k of the episode's
+    `wsp.objects` is the visible surface, else 0."""
+    return _label_images(Path(config_dir), episode_index, OBJECT_MASK_COLUMN, False)
+
+
+def _label_images(config_dir: Path, episode_index: int, column: str, first_only: bool) -> np.ndarray:
+    """One episode's PNG label images of `column` in the config's masks file, decoded in frame order."""
     from PIL import Image
 
-    path = Path(config_dir) / ROBOT_MASKS
+    path = config_dir / MASKS
     if not path.exists():
-        raise VideoError(f"{path}: missing; releases before format 0.2.0 kept the masks elsewhere: rebuild the "
-                         "release with this version of worldsimprobe")
+        raise VideoError(f"{path}: missing; this release is not of format {BENCHMARK_VERSION}: rebuild it with "
+                         "this version of worldsimprobe (`wsp build`)")
     stat = path.stat()
     masks, groups = _mask_row_groups(str(path), stat.st_mtime_ns, stat.st_size)
-    columns = ["episode_index", "frame_index", MASK_COLUMN]
+    columns = ["episode_index", "frame_index", column]
     t = (masks.read(columns=columns) if groups is None
          else masks.read_row_groups(groups.get(episode_index, []), columns=columns))
     keep = pc.equal(t["episode_index"], episode_index)
     if first_only:
         keep = pc.and_(keep, pc.equal(t["frame_index"], 0))
-    cells = t.filter(keep).sort_by("frame_index").column(MASK_COLUMN).to_pylist()
-    n = 1 if first_only else episodes(Path(config_dir))[episode_index]["length"]
+    cells = t.filter(keep).sort_by("frame_index").column(column).to_pylist()
+    n = 1 if first_only else episodes(config_dir)[episode_index]["length"]
     if len(cells) != n:
-        raise VideoError(f"{path}: episode {episode_index} has {len(cells)} masks, expected {n}")
+        raise VideoError(f"{path}: episode {episode_index} has {len(cells)} {column} images, expected {n}")
     return np.stack([np.asarray(Image.open(io.BytesIO(c))) for c in cells])
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-BENCHMARK_VERSION = "0.2.0"  # 0.2.0: robot masks beside the LeRobot data, simulator state under sim.*
+BENCHMARK_VERSION = "0.3.0"  # the release format: CHANGELOG.md lists what each version changed
 CODEBASE_VERSION = "v3.0"  # LeRobot dataset format
 DEFAULT_RELEASE_NAME = "worldsimprobe"
 
@@ -20,11 +20,13 @@ RELEASE_JSON = "release.json"
 CARD = "README.md"
 CROISSANT = "croissant.json"
 INSTANCES = "instances.parquet"
-# Per config: the exact robot label image of every frame (columns index, episode_index, frame_index and
-# robot_mask, a single-channel PNG: 0 not robot, 1 arm, 2 wrist/hand/fingers). Kept out of LeRobot's features
-# so that no policy is ever fed the ground-truth mask as a camera.
-ROBOT_MASKS = "robot_masks.parquet"
+# Per config: the exact simulator label images of every frame, one row per frame (columns index, episode_index,
+# frame_index, robot_mask and object_mask, each a single-channel PNG). robot_mask: 0 not robot, 1 arm,
+# 2 wrist/hand/fingers; object_mask: k + 1 where object k of the episode's `wsp.objects` is the visible surface,
+# else 0. Kept out of LeRobot's features so that no policy is ever fed a ground-truth mask as a camera.
+MASKS = "masks.parquet"
 MASK_COLUMN = "robot_mask"
+OBJECT_MASK_COLUMN = "object_mask"
 BUILD_REPORT = "build_report.json"  # per config, beside instances.parquet
 INPUTS_DIR = "inputs"  # per config of an inputs-only release (`wsp export-inputs`): what a model needs, no more
 FIRST_FRAME = "inputs/first_frames/{episode_id}.png"  # frame 0 of each scored episode, lossless
@@ -61,6 +63,35 @@ EPISODE_COLUMNS = (
 
 class ReleaseError(RuntimeError):
     """A folder that is not (or not yet) a readable WorldSimProbe release."""
+
+
+def rebuild_commands(root: Path, release: dict) -> list[str]:
+    """The `wsp build` command of each config of a parsed `release.json`, from its recorded build config: what
+    rebuilds the release in this version's format."""
+    out = []
+    for name, entry in sorted(release.get("configs", {}).items()):
+        c = entry.get("build_config", {})
+        args = [f"--platform {c.get('platform', split_config(name)[1])}", f"--suite {c.get('suite', split_config(name)[0])}"]
+        args += [f"--count {c['count']}"] if c.get("count") else []
+        args += [f"--tasks {' '.join(c['tasks'])}"] if c.get("tasks") else []
+        args += [f"--seed {c['seed']}"] if c.get("seed") else []
+        args += [f"--seed-range {c['seed_range']}"] if c.get("seed_range") else []
+        args += [f"--primitives {' '.join(c['primitives'])}"] if c.get("primitives") else []
+        out.append(f"wsp build {' '.join(args)} --out {Path(root)}")
+    return out
+
+
+def format_problem(root: Path, release: dict) -> str | None:
+    """One line saying why a release's format is not this version's, with the command that rebuilds it; None when it
+    is this version's."""
+    found = release.get("version")
+    if found == BENCHMARK_VERSION:
+        return None
+    commands = rebuild_commands(root, release)
+    how = (f"rebuild it into a new folder: {commands[0]}" + (f" (and {len(commands) - 1} more configs; "
+           "release.json records each build)" if len(commands) > 1 else "")) if commands else "rebuild it with `wsp build`"
+    return (f"{root}: release format {found!r}, this worldsimprobe reads format {BENCHMARK_VERSION!r} (object masks "
+            f"beside the robot masks, which T5 scores against); {how}")
 
 
 def split_config(config: str) -> tuple[str, str]:

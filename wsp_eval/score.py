@@ -46,36 +46,14 @@ from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
 from wsp_eval.reference import reference_size
 from wsp_eval.reference_cache import results_folder
-from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES, RELEASE_JSON, load_release, split_config
+from wsp_eval.release_format import INSTANCES, RELEASE_JSON, format_problem, load_release, split_config
 from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
-SCORING_VERSION = 20  # what the scores mean, in the report and the resume cache's key (a cache of an older version
-#   is discarded): bump it with every metric change. 2: T4's colour-region object tracker (docs/validity.md §2);
-#   3: T5's learned judge version 2, trained with twice the LIBERO references (docs/validity.md §1);
-#   4: T5's judge version 3: ALOHA's clips judged by weights trained on ALOHA (ManiSkill and LIBERO unchanged);
-#   5: T4's colour region places a partly hidden object by an occlusion-aware fit (docs/validity.md §2);
-#   6: a video at another resolution than its reference's is refused (scored only with accept_lossy; §5);
-#   7: T5's judge version 4: ManiSkill's clips judged by weights trained on ManiSkill alone (§1);
-#   8: T5's judge version 5: ManiSkill's clips judged by two networks' mean (expert primitives, PickCube T4) (§1)
-#   9: T4's LK stage seeds its grid at half the SPEC's radius, on the object itself (§2)
-#   10: T5's judge versions 6 and 7: every platform's weights trained with frozen-object negatives (§1)
-#   11: T5's judge version 8: object_ok needs a colour-distinct object still there at the end (`persists`, §1)
-#   12: T5's judge version 9: a ManiSkill drop's object_ok is the mean of the network's and a drop verifier's (§1)
-#   13: T5's judge version 10: LIBERO's clips judged by version 7's network averaged with one trained on more (§1)
-#   14: T5's judge version 11: LIBERO's by three networks trained on every (task, primitive) pair T5 builds (§1)
-#   15: T5's judge version 12: LIBERO's three networks retrained with the living-room pushes and taps added (§1)
-#   16: T5's judge version 13: LIBERO's three networks retrained with `KITCHEN_SCENE10`'s pushes and taps added (§1)
-#   17: T5's judge version 14: LIBERO's three networks retrained on that task's pushes built from a side the hand
-#       can leave (the builder's side retry, §1 "Pushes and taps from a side the hand can leave")
-#   18: T5's judge version 15: LIBERO's object_ok is the mean of version 14's and a verifier's trained with erased
-#       objects as negatives (§1, "Version 15")
-#   19: T5's judge version 16: ManiSkill's pull exempt from the persistence rule (the hand covers the pulled cube at
-#       the end; §1, "Version 16")
-#   20: T5's judge version 17: the rule applies to ManiSkill's pull again; its script raises the hand clear of the
-#       cube where the camera looks from the hand's side (§1, "Version 17")
+SCORING_VERSION = 21  # what the scores mean, in the report and the resume cache's key (a cache of another version is
+#   discarded): bump it with every metric change and say in CHANGELOG.md what it does to scores
 ENCODING_ON = "lossless at the reference resolution only"  # the report's `encoding_check`
 ENCODING_OFF = "off (lossy or resampled videos scored)"
 BOOTSTRAP = 1000  # resamples for the 95% CIs
@@ -279,10 +257,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
 
     submission, release, out = Path(submission), Path(release), Path(out)
     rel_meta = load_release(release)
-    if rel_meta.get("version") != BENCHMARK_VERSION:
-        raise ScoreError(f"{release}: release format {rel_meta.get('version')!r}; this evaluator reads "
-                         f"{BENCHMARK_VERSION!r}. Rebuild the release with this version of worldsimprobe (or score "
-                         "with the version that built it)")
+    if (problem := format_problem(release, rel_meta)) is not None:
+        raise ScoreError(problem)
     meta, configs = _preflight(submission, release, allow_missing)
     needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
     backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
@@ -418,6 +394,8 @@ def aggregate(records: list[dict], rows: dict[str, list[dict]], configs: list[st
             entry["judge_agreement"] = 100.0 * float(np.mean([c["label"] == row["primitive"]
                                                               for c, row in zip(checks, rows[config])]))
             entry["judge_reference_score"] = float(np.mean([c["score"] for c in checks]))
+            recognised = np.array([np.mean([s.get("recognised", 0.0) for s in r["seeds"]]) for r in recs])
+            entry["primitive_recognised"] = _suite_score(recognised, groups, True)
         platforms.setdefault(platform, {"suites": {}})["suites"][suite] = entry
         samples.setdefault(platform, {})[suite] = boot
     for platform, p in platforms.items():

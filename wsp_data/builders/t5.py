@@ -1,4 +1,4 @@
-"""T5 Interaction dynamics (SPEC §3 T5).
+"""T5 Interaction dynamics (spec §3.5).
 
 Proposal: a replay-verified successful expert trajectory of the slot's task; its branch step is
 `BACKOFF` steps before first contact (the first frame where a robot link touches the task's target, or the
@@ -8,8 +8,9 @@ expert is re-run up to that step and the slot's primitive replaces the rest: the
 (`PlatformKit.t5_scene`; ManiSkill's knock-over and tap), whose source must succeed with the prop untouched.
 Validation, unrendered first: common validity (SPEC §5), no other object shifted by more than 1 cm, and the
 primitive's acceptance rule (`t5_rules`, with the platform's `t5_rule_thresholds`) on the evaluated object's
-simulator states; only then rendered, and re-checked on the rendered rollout; the evaluated object must be what
-the camera sees at its projected frame-0 centre, the point the judge is given (`t4.centre_hidden`). Slots are
+simulator states; only then rendered, and re-checked on the rendered rollout; its score must be defined: the
+evaluated object's image moves visibly (`wsp_eval.object_track`, spec §4.3), as RMFA's suites require a scorable
+window. Slots are
 balanced exactly by primitive over the platform's primitives (`PlatformKit.t5_primitives`): slot k gets the
 (k mod n)-th and the next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn.
 """
@@ -22,10 +23,10 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
-from wsp_data.builders.t4 import centre_hidden
 from wsp_data.builders.t5_rules import MOTION_ONSET, check
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
+from wsp_eval.object_track import object_track
 from wsp_eval.tracking import frame_size, project
 
 BACKOFF = 4  # steps (0.2 s) before first contact
@@ -56,6 +57,11 @@ def first_contact(poses: np.ndarray, contacts: np.ndarray) -> int | None:
     return int(hits[0]) if len(hits) else None
 
 
+def object_motion_scorable(rgb: np.ndarray, robot: np.ndarray, objects: np.ndarray, ev: int) -> bool:
+    """Whether the evaluated object (column `ev`) moves visibly in its reference video (`ObjectTrack.scorable`)."""
+    return object_track(rgb, objects, ev + 1, robot).scorable
+
+
 def max_shift(poses: np.ndarray) -> float:
     """Largest distance of an object from its frame-0 position, (T, 7) poses."""
     return float(np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1).max())
@@ -68,7 +74,8 @@ class T5Builder(SuiteBuilder):
                    "scripted primitive (push, pull, drag, rotate, shake, tap, knock-over, drop), balanced by "
                    "primitive. Kept only when the evaluated object's simulator states pass the primitive's rule "
                    "(`primitive`, `evaluated_object` and the measured quantities are columns). Score: primitive "
-                   "judge on 12 frames.")
+                   "object-response fidelity (where the generated video shows the object against where the "
+                   "reference does), gated by the arm's RMFA.")
     roles = ("reference",)
 
     def __init__(self, config: BuildConfig):
@@ -117,8 +124,8 @@ class T5Builder(SuiteBuilder):
         poses = rendered.stack("object_poses")
         first = rendered.observations[0]
         pixel = project(poses[0, ev, :3], rendered.intrinsic, rendered.extrinsic, frame_size(first.rgb))
-        if (hidden := centre_hidden(first.objects, ev, pixel)) is not None:
-            return Dropped("object_hidden_at_centre", steps, simulated, hidden)  # the judge's point would miss it
+        if not object_motion_scorable(rendered.stack("rgb"), rendered.stack("mask"), rendered.stack("objects"), ev):
+            return Dropped("no_scorable_object_motion", steps, simulated)
         base_xy = rig.base_xy()
         _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy, **self.thresholds)
         parameters = {"primitive": primitive, "evaluated_object": evaluated, "branch_step": b.branch,

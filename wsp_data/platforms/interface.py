@@ -64,9 +64,10 @@ class Observation:
     success: bool
     rgb: np.ndarray | None = None  # (info.height, info.width, 3) uint8
     mask: np.ndarray | None = None  # (info.height, info.width) uint8 labels: 0 not robot, 1 arm, 2 wrist/hand/fingers
-    objects: np.ndarray | None = None  # (info.height, info.width) uint8, after a reset only (frame 0): k + 1 where
-    #   tracked object k is the visible surface, else 0. T4's builder checks with it that the evaluated object is
-    #   what the camera sees at its projected centre; a platform without it skips that check.
+    objects: np.ndarray | None = None  # (info.height, info.width) uint8 labels: k + 1 where tracked object k is the
+    #   visible surface, else 0 (exact simulator segmentation). The release stores it per frame beside `mask` (T5
+    #   scores the object's motion on it); T4's builder checks with frame 0's that the evaluated object is what the
+    #   camera sees at its projected centre.
 
 
 @dataclass
@@ -206,9 +207,9 @@ class PlatformKit(ABC):
 
         Returns:
             a platform whose `replay` fills `Observation.rgb` ((H, W, 3) uint8, `info.height` × `info.width`)
-            and `.mask` ((H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers), and sets the rollout's camera `intrinsic`
-            (3, 3) and `extrinsic` (3, 4, OpenCV world→camera, m). Recommended: frame 0's `.objects` (the objects'
-            visible label image), with which T4 drops an instance whose evaluated object is hidden at its centre.
+            `.mask` ((H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers) and `.objects` ((H, W) uint8: k + 1
+            where recorded object k is the visible surface, else 0) of every frame, and sets the rollout's camera
+            `intrinsic` (3, 3) and `extrinsic` (3, 4, OpenCV world→camera, m).
         Called:
             once per task per build worker, after an unrendered replay passed validation.
         """

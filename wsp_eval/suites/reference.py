@@ -11,14 +11,15 @@ import numpy as np
 
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
-from wsp_eval.reference import iter_reference_frames, reference_masks
+from wsp_eval.reference import iter_reference_frames, reference_masks, reference_object_masks
 from wsp_eval.reference_cache import load_or_compute_result
 from wsp_eval.release_format import split_config
 
 
 @dataclass
 class InstanceReference:
-    """One instance of a config: its instance row, reference frames and robot masks per role (decoded once)."""
+    """One instance of a config: its instance row, reference frames, robot and object masks per role (decoded
+    once)."""
 
     config_dir: Path
     row: dict
@@ -61,6 +62,13 @@ class InstanceReference:
         key = ("masks", role)
         if key not in self._cache:
             self._cache[key] = reference_masks(self.config_dir, self.episode(role))
+        return self._cache[key]
+
+    def object_masks(self, role: str) -> np.ndarray:
+        """The role's object label masks (length, H, W) uint8: k + 1 where object k is the visible surface."""
+        key = ("objects", role)
+        if key not in self._cache:
+            self._cache[key] = reference_object_masks(self.config_dir, self.episode(role))
         return self._cache[key]
 
     def first_mask(self, role: str) -> np.ndarray:

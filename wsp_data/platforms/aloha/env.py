@@ -418,7 +418,7 @@ class AlohaPlatform:
             mujoco.mj_setState(m, d, self._scenes[seed], spec)
             mujoco.mj_forward(m, d)
         self.start_poses = {name: self.object_pose(name) for name in self.free}
-        return self._observe(first=True)
+        return self._observe()
 
     def step(self, action: np.ndarray, observe: bool = True) -> Observation | None:
         self._apply(action)
@@ -426,7 +426,7 @@ class AlohaPlatform:
         mujoco.mj_forward(self.model, self.data)  # positions, contacts and cameras of the state just reached
         return self._observe() if observe else None
 
-    def _observe(self, first: bool = False) -> Observation:
+    def _observe(self) -> Observation:
         d = self.data
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         for k, name in enumerate(self.object_names):
@@ -435,12 +435,12 @@ class AlohaPlatform:
         ob = Observation(qpos=np.asarray(d.qpos[QPOS_INDEX], dtype=np.float32), tcp_pose=tcp.astype(np.float32),
                          object_poses=poses, contacts=self.contacts(), success=bool(self.spec.success_test(self)))
         if self.render:
-            ob.rgb, ob.mask, ob.objects = self.render_frame(objects=first)
+            ob.rgb, ob.mask, ob.objects = self.render_frame()
         return ob
 
-    def render_frame(self, objects: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """RGB (240, 320, 3) uint8, robot label mask (240, 320) uint8 of the head camera and, when `objects`, the
-        tracked objects' label image (k + 1 where object k is the visible surface, else 0)."""
+    def render_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """RGB (240, 320, 3) uint8, robot label mask (240, 320) uint8 of the head camera and the tracked objects'
+        label image (240, 320) uint8 (k + 1 where object k is the visible surface, else 0)."""
         r = self._renderer
         if r is None:
             raise PlatformError("the platform was created without a renderer")
@@ -455,10 +455,8 @@ class AlohaPlatform:
         mask = np.zeros(seg.shape[:2], dtype=np.uint8)
         ids = seg[..., 0][geom]
         mask[geom] = self.geom_label[ids]
-        labels = None
-        if objects:
-            labels = np.zeros(seg.shape[:2], dtype=np.uint8)
-            labels[geom] = self.geom_object[ids] + 1
+        labels = np.zeros(seg.shape[:2], dtype=np.uint8)
+        labels[geom] = self.geom_object[ids] + 1
         return rgb, mask, labels
 
     def camera_params(self) -> tuple[np.ndarray, np.ndarray]:

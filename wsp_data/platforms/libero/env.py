@@ -257,7 +257,7 @@ class LiberoPlatform:
         c.goal_pos, c.goal_ori = goal_pos.copy(), goal_ori.copy()
         self.robot.gripper.current_action = grip.copy()
         c.update(force=True)
-        return self._observe(first=True)
+        return self._observe()
 
     def set_object_pose(self, name: str, pose: np.ndarray) -> None:
         entity = self.u.objects_dict.get(name)
@@ -270,7 +270,7 @@ class LiberoPlatform:
         self.u.step(np.asarray(action, dtype=np.float64))
         return self._observe()
 
-    def _observe(self, first: bool = False) -> Observation:
+    def _observe(self) -> Observation:
         d = self.data
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         for k, name in enumerate(self.object_names):
@@ -282,7 +282,7 @@ class LiberoPlatform:
             object_poses=poses, contacts=self.contacts(), success=bool(self.u._check_success()),
         )
         if self.render:
-            ob.rgb, ob.mask, ob.objects = self.render_frame(objects=first)
+            ob.rgb, ob.mask, ob.objects = self.render_frame()
         return ob
 
     def contacts(self) -> np.ndarray:
@@ -296,9 +296,9 @@ class LiberoPlatform:
                     out[self.geom_object[other]] = True
         return out
 
-    def render_frame(self, objects: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Upright RGB (128, 128, 3) uint8, robot label mask (128, 128) uint8 of the evaluated camera and, when
-        `objects`, the tracked objects' label image (k + 1 where object k is the visible surface, else 0)."""
+    def render_frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Upright RGB (128, 128, 3) uint8, robot label mask (128, 128) uint8 of the evaluated camera and the
+        tracked objects' label image (128, 128) uint8 (k + 1 where object k is the visible surface, else 0)."""
         ctx = self.sim._render_context_offscreen
         if ctx is None:
             raise PlatformError("no offscreen render context: the platform was created without a renderer")
@@ -321,8 +321,8 @@ class LiberoPlatform:
                 lut[g.segid + 1] = self.geom_label[g.objid]
                 olut[g.segid + 1] = self.geom_object[g.objid] + 1
         seg[seg > scn.ngeom] = 0
-        labels = np.ascontiguousarray(olut[seg][::-1]) if objects else None
-        return np.ascontiguousarray(rgb[::-1]), np.ascontiguousarray(lut[seg][::-1]), labels
+        return (np.ascontiguousarray(rgb[::-1]), np.ascontiguousarray(lut[seg][::-1]),
+                np.ascontiguousarray(olut[seg][::-1]))
 
     def camera_params(self) -> tuple[np.ndarray, np.ndarray]:
         """OpenCV intrinsics (3, 3) and world→camera extrinsics (3, 4) of the upright evaluated view."""

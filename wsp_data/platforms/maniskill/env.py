@@ -122,7 +122,7 @@ class ManiSkillPlatform:
         self._prune_sensors()
         self.object_names = objects
         self._awake = tuple(e.name for e in extras if not e.sleeps)
-        self._lut: np.ndarray | None = None
+        self._luts: tuple[np.ndarray, np.ndarray] | None = None
         self._pin = None
 
     # -- lifecycle ------------------------------------------------------------------------------
@@ -151,14 +151,18 @@ class ManiSkillPlatform:
             raise PlatformError(f"{self.task} has no actor {name!r}")
         return a
 
-    def _label_lut(self) -> np.ndarray:
-        """Segmentation id → mask label (0 / 1 / 2), built once from the env's id map."""
-        lut = np.zeros(max(self.u.segmentation_id_map) + 1, dtype=np.uint8)
+    def _label_luts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Segmentation id → robot label (0 / 1 / 2) and → object label (k + 1 for tracked object k, else 0),
+        built once per scene from the env's id map."""
+        size = max(self.u.segmentation_id_map) + 1
+        robot_lut, object_lut = np.zeros(size, dtype=np.uint8), np.zeros(size, dtype=np.uint8)
         robot = self.robot
         for sid, obj in self.u.segmentation_id_map.items():
             if isinstance(obj, Link) and obj.articulation is robot:
-                lut[sid] = MASK_DISTAL if obj.name in DISTAL_LINKS else MASK_ARM
-        return lut
+                robot_lut[sid] = MASK_DISTAL if obj.name in DISTAL_LINKS else MASK_ARM
+        for k, name in enumerate(self.object_names):
+            object_lut[self.actor(name)._objs[0].per_scene_id] = k + 1
+        return robot_lut, object_lut
 
     # -- stepping ---------------------------------------------------------------------------------
     def _prune_sensors(self) -> None:
@@ -174,7 +178,7 @@ class ManiSkillPlatform:
         rollout independent of the env's history, so shards, workers and resumed builds agree."""
         obs, _ = self.env.reset(seed=int(seed), options={"reconfigure": True})
         self._prune_sensors()
-        self._lut = None  # segmentation ids are re-read from the rebuilt scene
+        self._luts = None  # segmentation ids are re-read from the rebuilt scene
         for name in self._awake:
             self.actor(name)._objs[0].find_component_by_type(physx.PhysxRigidDynamicComponent).set_sleep_threshold(0.0)
         if placements:
@@ -185,13 +189,13 @@ class ManiSkillPlatform:
                 actor.set_linear_velocity(torch.zeros(1, 3))
                 actor.set_angular_velocity(torch.zeros(1, 3))
             obs = self.u.get_obs()
-        return self._observe(obs, first=True)
+        return self._observe(obs)
 
     def step(self, action: np.ndarray) -> Observation:
         obs, _, _, _, _ = self.env.step(torch.as_tensor(np.asarray(action, dtype=np.float32))[None])
         return self._observe(obs)
 
-    def _observe(self, obs, first: bool = False) -> Observation:
+    def _observe(self, obs) -> Observation:
         u = self.u
         poses = np.full((MAX_OBJECTS, 7), np.nan, dtype=np.float32)
         contacts = np.zeros(MAX_OBJECTS, dtype=bool)
@@ -207,14 +211,11 @@ class ManiSkillPlatform:
         if self.render:
             cam = obs["sensor_data"][CAMERA]
             ob.rgb = _np(cam["rgb"][0]).astype(np.uint8)
-            seg = _np(cam["segmentation"][0, ..., 0]).astype(np.int64)
-            if self._lut is None:
-                self._lut = self._label_lut()
-            ob.mask = self._lut[np.clip(seg, 0, len(self._lut) - 1)]
-            if first:
-                ob.objects = np.zeros(seg.shape, dtype=np.uint8)
-                for k, name in enumerate(self.object_names):
-                    ob.objects[seg == self.actor(name)._objs[0].per_scene_id] = k + 1
+            if self._luts is None:
+                self._luts = self._label_luts()
+            robot_lut, object_lut = self._luts
+            seg = np.clip(_np(cam["segmentation"][0, ..., 0]).astype(np.int64), 0, len(robot_lut) - 1)
+            ob.mask, ob.objects = robot_lut[seg], object_lut[seg]
         return ob
 
     def robot_touches(self, actor: Actor) -> bool:
