@@ -1,4 +1,4 @@
-"""A research world model behind `wsp generate`'s batched call (README, "Plugging in a model"):
+"""A research world model behind `wsp generate`'s batched call (README, "Score a model in three commands"):
     wsp generate --model docs.example_adapter:model --release worldsimprobe --out my-submission"""
 import numpy as np
 

@@ -1,13 +1,13 @@
 """The learned T5 judge (`net`) on the shared tiny releases: test-range seeds, which no training clip comes from
 (the judge trains on `--seed-range train` builds only; its record says which).
 
-Tolerances: the judge's measured full agreement on fresh references is in docs/validity.md §1 (≥ 95 % per
+Tolerances: the judge's measured agreement on fresh references is in docs/validity.md, Primitive recognition (≥ 95 % per
 platform on ≥ 16 references per primitive); on the 12 tiny-release references here (8 ManiSkill, 4 LIBERO) we
 allow one miss, so the test fails when the judge is clearly worse than measured, not on a single borderline clip.
-The rejections (static, still objects, no robot) are required on every clip, as docs/judge.md reports them; so is
+The rejections (static, still objects, no robot) are required on every clip, as docs/validity.md reports them; so is
 the frozen clip's (the robot performs the primitive, the object held still) on the platforms whose weights
 trained on frozen clips (`FROZEN_TRAINED`; measured 3–11 of 55–166 fresh ones still accepted on ManiSkill, none of
-55 on ALOHA, docs/validity.md §1), where it visibly differs from its reference.
+55 on ALOHA), where it visibly differs from its reference.
 ALOHA's weights are checked on the ALOHA tiny release in tests/test_aloha.py (its oracle's T5 score).
 """
 
@@ -29,7 +29,7 @@ from wsp_eval.backends.judge_net import (CHANNELS, OBJECT_WEIGHTS, PERSIST_FRAME
 from wsp_eval.judge_data import t4_clips, t5_clips
 
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
-FROZEN_TRAINED = ("maniskill", "libero", "aloha")  # every platform's weights since version 7
+FROZEN_TRAINED = ("maniskill", "libero", "aloha")  # every platform's weights are trained with frozen-object negatives
 ENSEMBLE = str(Path(__file__).resolve().parents[1] / "scripts" / "ensemble_judge.py")
 
 
@@ -65,12 +65,10 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform, rol
     """Every (task, primitive) pair T5 can build on a platform from its default task list was planned in the
     training builds of every network in that platform's weights (each member of an ensemble on its own: their
     configs are in the weights' record; the builder's own slot plan replayed). A judge never shown a pair may fail
-    there: on LIBERO's pairs missing from version 10's training (its builds cycled each primitive's task list from
-    the start), version 10 scored 33 of 41 fresh references, confusing pulls with drops task by task; and a member
-    that never saw them undid most of what the other learned when the two were averaged (docs/validity.md §1,
-    "After version 10"); since version 11 each of the three members saw every pair ("Version 11"). The same for an
-    object verifier that judges every label (LIBERO's since version 15). Planned, not kept: a slot may still have
-    failed every attempt."""
+    there (on LIBERO a network whose builds missed pairs confused pulls with drops, 33 of 41 fresh references), and
+    an ensemble member that never saw them undoes much of what the others learned; so every member must have seen
+    every pair, and so must an object verifier that judges every label (LIBERO's). Planned, not kept: a slot may
+    still have failed every attempt."""
     from wsp_data.builders.base import BuildConfig
     from wsp_data.builders.t5 import T5Builder
     from wsp_data.platforms import kit
@@ -155,7 +153,7 @@ def test_weights_are_chosen_by_platform_and_a_platform_without_weights_is_refuse
 
 
 def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
-    """`scripts/ensemble_judge.py` (how ManiSkill's version 5 was made): one ONNX file whose logits are the mean of
+    """`scripts/ensemble_judge.py` (how the multi-network weight files are made): one ONNX file whose logits are the mean of
     its members' (here ALOHA's weights and ManiSkill's drop verifier, two single networks, run side by side as one
     network), with a record naming both; float32 sums in another order, so to 1e-5."""
     import subprocess
@@ -178,7 +176,7 @@ def test_an_ensemble_file_judges_by_its_members_mean(tmp_path, judge, clips):
     nested = subprocess.run([sys.executable, ENSEMBLE, str(members[0]), str(PLATFORM_WEIGHTS["maniskill"]), "--out",
                              str(tmp_path / "nested.onnx")], capture_output=True, text=True, timeout=120)
     assert nested.returncode != 0 and "not an ensemble" in nested.stderr  # members are single trained networks
-    bare = tmp_path / "bare.onnx"  # weights without their training record (as `git show` of the .onnx alone gives)
+    bare = tmp_path / "bare.onnx"  # weights without their training record (an .onnx copied without its .json)
     bare.write_bytes(members[1].read_bytes())
     unrecorded = subprocess.run([sys.executable, ENSEMBLE, str(members[0]), str(bare), "--out",
                                  str(tmp_path / "unrecorded.onnx")], capture_output=True, text=True, timeout=120)
@@ -224,9 +222,9 @@ def test_references_score_100_and_negatives_are_rejected(judge, clips):
 
 
 def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, suites_release):
-    """Version 9: where the network says `drop` on a ManiSkill clip, `object_ok` is decided by the mean of its object
-    logit and the drop verifier's (trained on training-range drops, `--object-of drop`; its record says so), then
-    version 8's persistence rule. On the tiny release's drop: the reference scores 100 and its frozen clip (the
+    """Where the network says `drop` on a ManiSkill clip, `object_ok` is decided by the mean of its object logit and
+    the drop verifier's (trained on training-range drops, `--object-of drop`; its record says so), then the
+    persistence rule. On the tiny release's drop: the reference scores 100 and its frozen clip (the
     object held still) 0, with both probabilities in the evidence. A ManiSkill clip of another label is the
     network's alone."""
     weights = OBJECT_WEIGHTS[("maniskill", "drop")]
@@ -250,11 +248,10 @@ def test_a_maniskill_drop_gets_its_object_verdict_from_the_drop_verifier(judge, 
 
 
 def test_a_libero_clip_gets_its_object_verdict_from_the_mean_with_an_erased_trained_verifier(judge, libero_release):
-    """Version 15: on LIBERO every label's `object_ok` is decided by the mean of the network's object logit and the
-    verifier's: three networks trained with version 14's recipe and data plus erased objects as negatives
-    (`--erased clear`; its record says so). Alone they doubt pushes and taps that slide under the gripper (151 of
-    164 references where version 14 keeps 160); the mean keeps version 14's references and credits fewer erased
-    objects (docs/validity.md §1, "Version 15"). On the tiny release: the mean is in the evidence, and on every
+    """On LIBERO every label's `object_ok` is decided by the mean of the network's object logit and the verifier's:
+    three networks trained with the LIBERO network's recipe and data plus erased objects as negatives
+    (`--erased clear`; its record says so). Alone they doubt pushes and taps that slide under the gripper; the mean
+    keeps the network's references and credits fewer erased objects. On the tiny release: the mean is in the evidence, and on every
     clip whose object is clearly erased the verifier doubts the object more than the network does, so the mean
     lowers its credit."""
     record = json.loads(OBJECT_WEIGHTS[("libero", None)].with_suffix(".json").read_text())
@@ -270,7 +267,7 @@ def test_a_libero_clip_gets_its_object_verdict_from_the_mean_with_an_erased_trai
 
 
 def test_persists_follows_the_object_to_the_end_of_the_clip():
-    """Version 8's rule on synthetic 12-frame clips (128², object position in the 256² scoring frame): a red
+    """The persistence rule on synthetic 12-frame clips (128², object position in the 256² scoring frame): a red
     square that slides away is still there; one that vanishes before the last `PERSIST_FRAMES` frames is not; an
     object whose colour is the whole scene's gives no evidence (None)."""
     rng = np.random.default_rng(0)
@@ -288,8 +285,8 @@ def test_persists_follows_the_object_to_the_end_of_the_clip():
 
 def test_an_object_erased_where_the_robot_acts_is_not_credited(judge, suites_release, aloha_release):
     """`erased` clips (the robot acts, the object fades out where it stood, as world models draw it) of the primitives
-    that end with the object released (`RELEASED`) score 0 on the ManiSkill and ALOHA tiny releases (5 and 5 here;
-    version 7 credited them in half to three quarters of fresh clips, docs/validity.md §1), and every reference keeps
+    that end with the object released (`RELEASED`) score 0 on the ManiSkill and ALOHA tiny releases (5 and 5 here; a
+    network without the rule credits half to three quarters of such fresh clips), and every reference keeps
     its object to the end. Drag, rotate and shake end in the hand, so the rule leaves them to the network."""
     for release, config in ((suites_release, "t5_maniskill"), (aloha_release, "t5_aloha")):
         clips = t5_clips(release, config, ("reference", "erased"))
@@ -301,9 +298,8 @@ def test_an_object_erased_where_the_robot_acts_is_not_credited(judge, suites_rel
 
 
 def test_a_maniskill_pull_ends_with_its_cube_in_sight(judge, suites_release):
-    """Version 17: ManiSkill's pull script leaves the hand between the camera and the cube, and since then raises it
-    `PULL_RISE` (was 6 cm, which left the fingers over the cube in the image in 18 of 96 fresh pulls; version 16
-    exempted pulls from the persistence rule, and credited erased pulls: docs/validity.md §1, "Version 17"). The
+    """ManiSkill's pull script leaves the hand between the camera and the cube, so it then raises it `PULL_RISE` (a
+    6 cm rise left the fingers over the cube in 18 of 96 fresh pulls, which the persistence rule then failed). The
     tiny release's pull reference: the rule finds the cube in the last frames and it scores 100; its erased clip,
     the cube faded out where the hand acted, is rejected by the rule."""
     from wsp_data.platforms.maniskill.primitives import CLEARANCE, PULL_RISE

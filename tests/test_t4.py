@@ -1,5 +1,5 @@
 """A real tiny T4 build (ManiSkill PickCube, 2 instances per kind): both loaders, and every kind's acceptance
-rule re-checked from the stored states with this file's own thresholds (SPEC §3 T4, docs/t4.md), not the
+rule re-checked from the stored states with this file's own thresholds (spec §3.4, docs/suites/t4.md), not the
 builder's code. The reference must also score 100 when the stored video is tracked like a submission."""
 
 from __future__ import annotations

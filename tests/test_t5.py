@@ -186,7 +186,7 @@ def test_primitives_restrict_the_slots():
 def test_a_pull_rises_clear_of_the_cube_where_the_camera_looks_from_the_hand():
     """The pull ends with the hand on the cube's far side from the base. Where the evaluated camera looks from that
     side (PickCube's, PushCube's and StackCube's, in front of the robot) the hand then rises `PULL_RISE`, since a 6 cm
-    rise hid the cube in about one pull in five (docs/validity.md §1, "Version 17"); PullCube's camera sits by the
+    rise hid the cube in about one pull in five (18 of 96 fresh pulls); PullCube's camera sits by the
     base, behind the cube, so its pulls keep the 6 cm rise every primitive ends with."""
     from wsp_data.platforms.maniskill.experts import task_spec
     from wsp_data.platforms.maniskill.primitives import BranchScript, away_from_base, camera_on_side

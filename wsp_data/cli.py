@@ -11,6 +11,7 @@
     wsp teleop --task T --seed S --operator NAME                     browser teleoperation → source trajectory
     wsp study corruption --release DIR --out DIR                     RMFA under blur / texture removal (validity)
     wsp study t5-negatives --release DIR --out DIR                   T5 and the label judge on generated-video negatives
+    wsp study t4-negatives --release DIR --out DIR                   T4 on objects moving without contact, and drawn blurred
     wsp rate SUB [SUB ...] --release DIR --annotator NAME --out DIR  human rating page on 127.0.0.1 (resumable)
     wsp study agreement --ratings DIR --reports REPORT [REPORT ...]  metrics against the human ratings
     wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
@@ -144,13 +145,18 @@ def parser() -> argparse.ArgumentParser:
     co.add_argument("--count", type=_positive, default=50, help="references (default 50, as the paper)")
     co.add_argument("--seed", type=int, default=0, help="seed of the background regions and the bootstrap")
     co.add_argument("--quiet", action="store_true", help="no progress bar")
-    tn = study.add_parser("t5-negatives", help="T5 and the label judge on generated-video negatives made from the "
-                                              "references (object frozen, erased, early, late, reversed, …)")
-    tn.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
-    tn.add_argument("--out", type=Path, required=True, help="folder for t5_negatives.{json,md,png}")
-    tn.add_argument("--configs", nargs="+", help="T5 configs (default: every T5 config of the release)")
-    tn.add_argument("--limit", type=_positive, help="instances per config (default: all)")
-    tn.add_argument("--quiet", action="store_true", help="no progress bar")
+    for name, text, files in (
+            ("t5-negatives", "T5 and the label judge on generated-video negatives made from the references (object "
+                             "frozen, erased, early, late, reversed, scaled, teleported, another object moved)",
+             "t5_negatives.{json,md,png}"),
+            ("t4-negatives", "T4 on generated-video stand-ins: the object shifted, faded, carried or smeared without "
+                             "contact (must score 0), or drawn blurred or noisy", "t4_negatives.{json,md}")):
+        neg = study.add_parser(name, help=text)
+        neg.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+        neg.add_argument("--out", type=Path, required=True, help=f"folder for {files}")
+        neg.add_argument("--configs", nargs="+", help="configs of the suite (default: every one of the release)")
+        neg.add_argument("--limit", type=_positive, help="instances per config (default: all)")
+        neg.add_argument("--quiet", action="store_true", help="no progress bar")
     ag = study.add_parser("agreement", help="Spearman ρ and binary agreement of scores with `wsp rate` ratings")
     ag.add_argument("--ratings", type=Path, required=True, help="the folder `wsp rate --out` wrote")
     ag.add_argument("--reports", type=Path, nargs="+", required=True, help="report folders (or report.json) of `wsp score`")
@@ -396,17 +402,17 @@ def cmd_study(args) -> int:
             (args.out / "agreement.md").write_text(text)
         return 0
 
-    if args.study == "t5-negatives":
-        from wsp_eval.studies import t5_negatives
+    if args.study in ("t4-negatives", "t5-negatives"):
+        from wsp_eval.studies import StudyError, t4_negatives, t5_negatives
 
+        study = t4_negatives if args.study == "t4-negatives" else t5_negatives
         try:
-            summary = t5_negatives.run(_release_or_error(args.release), args.out, configs=args.configs,
-                                       limit=args.limit, progress=not args.quiet)
-        except t5_negatives.StudyError as e:
+            summary = study.run(_release_or_error(args.release), args.out, configs=args.configs, limit=args.limit,
+                                progress=not args.quiet)
+        except StudyError as e:
             raise CliError(str(e)) from None
-        print(t5_negatives.markdown(summary))
-        print(f"written: {args.out / 't5_negatives.md'}, {args.out / 't5_negatives.json'}, "
-              f"{args.out / 't5_negatives.png'}")
+        print(study.markdown(summary))
+        print("written: " + ", ".join(str(args.out / name) for name in study.OUTPUTS))
         return 0
 
     try:

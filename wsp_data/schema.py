@@ -15,7 +15,7 @@ from wsp_eval.release_format import (  # noqa: F401  (re-exported: the build sid
     MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON, SOURCE_ROLE, STAGING_DIR, SUITES,
 )
 
-# ManiSkill's native streams (SPEC §2): the platform module imports these, never the reverse.
+# ManiSkill's native streams (spec §2): the platform module imports these, never the reverse.
 ACTION_DIM = 8  # 7 arm joint targets + gripper command (1 open … −1 closed)
 EE_ACTION_DIM = 7  # TCP target position in the robot base frame, XYZ Euler angles, gripper command
 
@@ -95,7 +95,7 @@ EE_POSE = ("x", "y", "z", "qw", "qx", "qy", "qz")  # world position (m) + quater
 
 @dataclass(frozen=True)
 class PlatformInfo:
-    """What a reader of a release needs to know about a platform (SPEC §2). `width` × `height`: the camera's
+    """What a reader of a release needs to know about a platform (spec §2). `width` × `height`: the camera's
     frames (px); `state_names` / `ee_names`: the columns of `observation.state` (arm joints first) and
     `observation.ee_pose` (per arm, xyz + quaternion wxyz); `state_text`: the state in words (the card)."""
 

@@ -1,4 +1,4 @@
-"""Robot-Masked Flow Alignment (RMFA, SPEC §4): flows, windows, active sets and scores; no simulator.
+"""Robot-Masked Flow Alignment (RMFA, spec §4.2): flows, windows, active sets and scores; no simulator.
 
 Pipeline for one video (reference or generated) over a duration T (the common duration of the pair):
 1. Sample at `EVAL_FPS` = 5 Hz: times t_k = k / 5 for every k with t_k ≤ T (t_0 = 0), each taking the

@@ -1,4 +1,4 @@
-"""Human reports of a score report (SPEC §6): Markdown, one self-contained HTML page with inline SVG plots,
+"""Human reports of a score report (spec §6): Markdown, one self-contained HTML page with inline SVG plots,
 and a compact Markdown table comparing several reports (baselines).
 
 Both renderers walk the same list of blocks (`_blocks`), so the Markdown and the HTML hold the same
@@ -270,12 +270,18 @@ def _breakdown(platform: str, key: str, suite: dict) -> list[Block]:
         blocks += [("p", f"By {groups.get('by', 'group')}:"), ("table", _group_table(groups)),
                    ("plot", f"{_label(key, suite)} by {groups.get('by', 'group')}",
                     lambda: _group_plot(platform, key, suite))]
+    if suite.get("primitive_recognised") is not None:
+        blocks.append(("p", f"Primitive recognised (paper protocol, the label judge; not part of the score): "
+                            f"{suite['primitive_recognised']:.1f}. The judge credits {JUDGE_FALSE_ACCEPT} of "
+                            "generated-video negatives in which the object does not respond as the simulator's "
+                            "(docs/validity.md, T5), so this column is an upper bound."))
     if confusion:
-        blocks += [("p", "Confusion matrix (rows: intended primitive, columns: judged label):"),
+        blocks += [("p", "Confusion matrix of the label judge (rows: intended primitive, columns: judged label):"),
                    ("table", _confusion_table(confusion)),
                    ("plot", "Primitive confusion heatmap", lambda: _confusion_plot(platform, confusion))]
     if agreement is not None:
-        blocks.append(("p", f"Judge agreement with the intended labels: {agreement:.3g}"))
+        blocks.append(("p", f"Label judge agreement with the intended labels on the simulator references: "
+                            f"{agreement:.3g}"))
     return blocks
 
 

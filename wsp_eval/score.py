@@ -1,5 +1,5 @@
 """`wsp score`: a submission against a release → per-instance results → suite, group and overall scores with
-95% bootstrap CIs (SPEC §6) → JSON, Markdown and HTML reports (`wsp_eval.report`).
+95% bootstrap CIs (spec §6) → JSON, Markdown and HTML reports (`wsp_eval.report`).
 
 - Seeds are averaged per instance before anything else; a suite score is the mean over instances (T5: over
   primitives of the mean within each), Overall = unweighted mean of a platform's T1–T5, and the macro average
@@ -12,7 +12,7 @@
   finished instances are cached); with it, the seed of every affected instance scores 0 and the report
   counts and lists the problems.
 - Encoding: a lossy or chroma-subsampled video, or one at another resolution than its reference's, is a problem
-  (`wsp_eval.video.encoding_problem`, `submission.RESAMPLED`, docs/validity.md §5); `accept_lossy` scores it
+  (`wsp_eval.video.encoding_problem`, `submission.RESAMPLED`, docs/submission.md, Encodings); `accept_lossy` scores it
   anyway, and the report says the encoding check was off (such scores are not comparable with others: codec
   noise lowers T1 most, resampling T1–T3).
 - Resumable: every finished instance is appended to `<out>/cache/instances.jsonl`; a re-run with the same

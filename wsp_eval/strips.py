@@ -4,7 +4,7 @@ Per scored config, the `WORST` lowest-scoring instances (their lowest-scoring se
 the clip, the generated video above its reference, the evaluated object's frame-0 position ringed on both for
 T4 and T5 and, on T4's generated row, the tracked object centroid's path so far; written as
 `strips/<config>/<n>.png` beside the report, with the evidence that decided the score (T1 r against r*, T2/T3
-RMFA per 2 s window, T4 displacement, gate and tracking, T5 the judge's verdict).
+RMFA per 2 s window, T4 displacement, gate and tracking, T5 the object's fidelity, the arm's RMFA and the label judge's verdict).
 """
 
 from __future__ import annotations
@@ -32,9 +32,9 @@ def evidence(suite: str, seed: dict, row: dict) -> str:
                 f"{'passed' if seed.get('gate_passed') else 'failed'} ({seed.get('gate', 0):.1f} px); object "
                 f"{'tracked' if seed.get('tracked', True) else 'lost'} in {seed.get('visible_fraction', 0):.0%} of frames")
     if suite == "t5":
-        ok = lambda b: "yes" if b else "no"  # noqa: E731
-        return (f"S {s:.0f}: judged {seed.get('label') or 'unreadable'} (intended {row.get('primitive')}); robot acts: "
-                f"{ok(seed.get('agent_ok'))}; object responds: {ok(seed.get('object_ok'))}")
+        return (f"S {s:.0f}: object fidelity {seed.get('object_fidelity', 0):.0f} (relative position error "
+                f"{seed.get('object_error', 0):.2f}), arm RMFA {seed.get('arm_rmfa', 0):.0f}; label judge (reported "
+                f"beside): judged {seed.get('label') or 'unreadable'} (intended {row.get('primitive')})")
     if suite in ("t2", "t3"):
         windows = ", ".join("–" if w is None else f"{w:.0f}" for w in seed.get("windows") or [])
         return f"RMFA {s:.1f} over the first {seed.get('common_seconds', 0):.1f} s; per 2 s window: {windows or '–'}"

@@ -6,7 +6,7 @@ target has moved 2 mm, whichever comes first: contacts shorter than a physics su
 expert is re-run up to that step and the slot's primitive replaces the rest: the platform's T5 rig does this
 (`PlatformKit.t5_rig(...).branch`, returning a `Branch`), and may add a prop beside the target
 (`PlatformKit.t5_scene`; ManiSkill's knock-over and tap), whose source must succeed with the prop untouched.
-Validation, unrendered first: common validity (SPEC §5), no other object shifted by more than 1 cm, and the
+Validation, unrendered first: common validity (spec §5), no other object shifted by more than 1 cm, and the
 primitive's acceptance rule (`t5_rules`, with the platform's `t5_rule_thresholds`) on the evaluated object's
 simulator states; only then rendered, and re-checked on the rendered rollout; its score must be defined: the
 evaluated object's image moves visibly (`wsp_eval.object_track`, spec §4.3), as RMFA's suites require a scorable

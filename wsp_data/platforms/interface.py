@@ -3,7 +3,7 @@
 A platform (a simulator with its tasks, expert, action sources and scene edits) is a `PlatformKit` subclass
 instance registered in `wsp_data.platforms.KITS` (built-in) or declared through the entry-point group
 `worldsimprobe.platforms` (third party). Builders (`wsp_data.builders`) never name a platform: everything
-simulator-specific they need comes through the hooks below. docs/adding_a_platform.md walks through them.
+simulator-specific they need comes through the hooks below. docs/guides/adding-a-platform.md walks through them.
 
 Hooks are grouped by the suites that call them:
 
@@ -136,7 +136,7 @@ class PlatformKit(ABC):
         `finger_dims`, `finger_closed_below`: state columns of finger joints and the |position| below which a
             finger closed on something (m; T4 drops a false contact whose fingers closed).
 
-    Objects the hooks return (duck-typed, see docs/adding_a_platform.md):
+    Objects the hooks return (duck-typed, see docs/guides/adding-a-platform.md):
         task spec: `.name`, `.instruction` (str), `.objects` (tuple of recorded object names, target first),
             `.target` (str).
         platform (a replayer): `.replay(seed, actions, placements=None) -> Rollout`, `.reset(seed) ->
@@ -155,7 +155,7 @@ class PlatformKit(ABC):
     finger_dims: ClassVar[tuple[int, ...]] = (7, 8)  # Panda's two finger joints …
     finger_closed_below: ClassVar[float] = 0.035  # … open to ±0.04 m
     default_counts: ClassVar[dict[str, int]] = {}  # `wsp build`'s --count when none is given, per suite (the
-    #   paper's counts, SPEC §3); a suite without one defaults to 100 episodes per selected task
+    #   paper's counts, spec §3); a suite without one defaults to 100 episodes per selected task
     rigs_per_worker: ClassVar[int | None] = None  # task rigs (simulators) a build worker keeps alive at once,
     #   least recently used closed first; None: every task's (`wsp_data.builders.rig.RigCache`)
 
@@ -303,7 +303,7 @@ class PlatformKit(ABC):
         return "a task that serves them"
 
     def t4_rig(self, task: str):
-        """One task's T4 simulators and scene edits (see docs/adding_a_platform.md, "T4").
+        """One task's T4 simulators and scene edits (see docs/guides/adding-a-platform.md, "T4").
 
         Returns:
             a rig with `.kit`, `.spec`, `.expert`, `.state` / `.render` (unrendered / rendered platforms),

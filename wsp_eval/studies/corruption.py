@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 
 from wsp_eval.flow import reference_flows, rmfa_score, video_flows
 from wsp_eval.release_format import INSTANCES, load_release
+from wsp_eval.studies import StudyError
 from wsp_eval.suites.reference import InstanceReference
 
 SIGMAS = (3.0, 6.0, 9.0, 12.0)  # Gaussian blur σ per level, px (the paper's strongest: 12)
@@ -41,10 +42,6 @@ MARGIN_PX = 4  # the background region keeps this far from the robot in every fr
 BOOTSTRAP = 10_000
 PAPER = {"robot": (30.55, 28.35, 32.83), "background": (7.93, 6.99, 8.90), "excess": (22.62, 20.98, 24.35),
          "monotone": (48, 50)}
-
-
-class StudyError(RuntimeError):
-    """A release that cannot be studied (no such config, too few instances)."""
 
 
 def background_regions(masks: np.ndarray, rng: np.random.Generator) -> np.ndarray:

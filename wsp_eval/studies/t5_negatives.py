@@ -25,7 +25,6 @@ type: the mean and the share of clips scoring ≥ `PASS`, for the T5 score and f
 
 from __future__ import annotations
 
-import json
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -36,7 +35,8 @@ import pyarrow.parquet as pq
 from wsp_eval import composites as cp
 from wsp_eval.baselines import NOISE_SIGMA, blur
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.release_format import INSTANCES, format_problem, load_release, split_config
+from wsp_eval.release_format import INSTANCES, split_config
+from wsp_eval.studies import run_negatives
 from wsp_eval.suites import t5
 from wsp_eval.suites.reference import InstanceReference
 
@@ -48,10 +48,6 @@ NOISE_SEED = 0
 POSITIVES = ("oracle", "blur", "blur_1px", "noise", "arm_blur", "lossless")
 NEGATIVES = ("static", "frozen", "erased", "early", "late", "reversed", "scaled", "teleport", "other_object")
 GOAL_MEAN, GOAL_SHARE = 10.0, 5.0  # every negative type: mean ≤ 10 and share ≥ PASS at most 5 %
-
-
-class StudyError(RuntimeError):
-    """A release this study cannot read (no T5 config, an older format)."""
 
 
 class Clip:
@@ -158,16 +154,6 @@ def variant_names() -> list[str]:
     return [*POSITIVES, *NEGATIVES, *(f"{n}+arm_blur" for n in NEGATIVES)]
 
 
-def t5_configs(release: Path) -> list[str]:
-    meta = load_release(release)
-    if (problem := format_problem(release, meta)) is not None:
-        raise StudyError(problem)
-    configs = sorted(c for c in meta.get("configs", {}) if split_config(c)[0] == "t5" and (release / c).is_dir())
-    if not configs:
-        raise StudyError(f"{release}: no T5 config to study")
-    return configs
-
-
 def score_clips(release: Path, config: str, backends, limit: int | None = None, progress=None) -> list[dict]:
     """One record per (instance, variant): the T5 score, its parts and the label judge's verdict."""
     rows = pq.read_table(release / config / INSTANCES).to_pylist()[:limit]
@@ -249,24 +235,12 @@ def plot(summary: dict, path: Path) -> None:
 
 
 def run(release: Path, out: Path, *, configs: list[str] | None = None, limit: int | None = None,
-        backends=None, progress: bool = True) -> dict:
-    """Score every variant of up to `limit` instances of each T5 config; write t5_negatives.{json,md,png}."""
-    from tqdm import tqdm
-
-    from wsp_eval import backends as registry
-    from wsp_eval.backends import BackendSpec
-    from wsp_eval.console import terminal
-
-    release, out = Path(release), Path(out)
-    configs = configs or t5_configs(release)
-    backends = backends or registry.make(BackendSpec(), t5.NEEDS)
-    total = sum(min(limit or 10**9, pq.read_metadata(release / c / INSTANCES).num_rows) for c in configs)
-    bar = tqdm(total=total, desc="t5 negatives", unit="instance", disable=not progress, file=terminal())
-    records = [r for c in configs for r in score_clips(release, c, backends, limit, bar.update)]
-    bar.close()
-    summary = summarise(records)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "t5_negatives.json").write_text(json.dumps({"summary": summary, "clips": records}, indent=1))
-    (out / "t5_negatives.md").write_text(markdown(summary))
-    plot(summary, out / "t5_negatives.png")
+        progress: bool = True) -> dict:
+    """Score every variant of up to `limit` instances of each T5 config; write the study's OUTPUTS."""
+    summary, _ = run_negatives(release, out, "t5", t5.NEEDS, score_clips, summarise, markdown,
+                               configs=configs, limit=limit, progress=progress)
+    plot(summary, Path(out) / "t5_negatives.png")
     return summary
+
+
+OUTPUTS = ("t5_negatives.md", "t5_negatives.json", "t5_negatives.png")

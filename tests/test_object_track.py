@@ -1,0 +1,145 @@
+"""T5's object-response fidelity (spec §4.3) on the tiny real releases of all three platforms: the object masks the
+builders store, the score of the reference itself, of a static video and of generated-video negatives made from
+the references with those masks, the refusal of an older release format, and `wsp study t5-negatives`.
+
+Tolerances: the oracle's relative error is not exactly 0 (the parabola's sub-pixel vertex and the mask centroid
+differ by ≈ 0.1 px), which stays far below X_FULL, so it scores exactly 100; a negative whose object does not
+move as the reference's has a relative error of about 1 or more (static: exactly 1 by construction), far above
+X_ZERO, so "≤ 10" leaves the margin the study measured (docs/validity.md, T5)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from wsp_eval import backends as registry
+from wsp_eval.backends import BackendSpec
+from wsp_eval.judge_data import visibly_different
+from wsp_eval.object_track import X_FULL, X_ZERO, fidelity, object_track, positions, relative_error
+from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
+from wsp_eval.score import ScoreError, score_submission
+from wsp_eval.studies import t5_negatives
+from wsp_eval.suites import t5
+from wsp_eval.suites.reference import InstanceReference
+from wsp_eval.tracking import frame_xy
+
+PLATFORMS = ("maniskill", "libero", "aloha")
+
+
+@pytest.fixture(scope="module")
+def releases(suites_release, libero_release, aloha_release):
+    return {"maniskill": suites_release, "libero": libero_release, "aloha": aloha_release}
+
+
+@pytest.fixture(scope="module")
+def backends():
+    return registry.make(BackendSpec(), t5.NEEDS)
+
+
+def _references(release, platform):
+    config = release / f"t5_{platform}"
+    return [InstanceReference(config, row) for row in pq.read_table(config / INSTANCES).to_pylist()]
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_every_frame_has_exact_object_and_robot_masks(releases, platform):
+    """masks.parquet holds both label images for every frame; the evaluated object's frame-0 pixels surround its
+    projected simulator position; robot and object labels never overlap."""
+    release = releases[platform]
+    table = pq.read_table(release / f"t5_{platform}" / MASKS)
+    assert {MASK_COLUMN, OBJECT_MASK_COLUMN} <= set(table.column_names)
+    for ref in _references(release, platform):
+        robot, objects = ref.masks("reference"), ref.object_masks("reference")
+        assert objects.shape == robot.shape == ref.frames("reference").shape[:3]
+        assert not ((robot > 0) & (objects > 0)).any()
+        label = int(ref.row["evaluated_index"]) + 1
+        ys, xs = np.nonzero(objects[0] == label)
+        assert len(xs), f"{ref.row['instance_id']}: the evaluated object is not in sight at frame 0"
+        h, w = objects.shape[1:]
+        u, v = frame_xy(ref.row["object_pixel_256"], w, h)  # the stored frame-0 projection of its simulator pose
+        # the projected centre lies within the object's visible pixels' extent (a partly hidden object's
+        # visible part need not be centred on it)
+        assert xs.min() - 2 <= u <= xs.max() + 2 and ys.min() - 2 <= v <= ys.max() + 2
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_the_reference_scores_100_and_a_static_video_0(releases, platform, backends):
+    for ref in _references(releases[platform], platform):
+        prepared = t5.prepare(ref, backends)
+        frames = ref.frames("reference")
+        oracle, detail = t5.score_seed(prepared, {"reference": (frames, ref.fps)}, backends)
+        assert oracle == 100.0 and detail["object_error"] < X_FULL / 2
+        static, detail = t5.score_seed(prepared, {"reference": (np.repeat(frames[:1], len(frames), 0), ref.fps)},
+                                       backends)
+        assert static == 0.0 and detail["object_error"] >= 1.0 - 1e-6
+
+
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_an_object_frozen_or_erased_while_the_arm_acts_scores_low(releases, platform, backends):
+    """The arm is the reference's pixel for pixel (its RMFA stays high), yet the object does not respond."""
+    for ref in _references(releases[platform], platform):
+        clip, prepared = t5_negatives.Clip(ref), t5.prepare(ref, backends)
+        for name in ("frozen", "erased", "reversed"):
+            frames = t5_negatives.variant_frames(clip, name)
+            if not visibly_different(frames, clip.frames):
+                continue  # no one could tell it from the reference: no negative
+            score, detail = t5.score_seed(prepared, {"reference": (frames, ref.fps)}, backends)
+            assert score <= 10.0, (ref.row["instance_id"], ref.row["primitive"], name, detail)
+            assert detail["arm_rmfa"] > 50.0
+
+
+def test_the_error_of_a_translated_object_is_exact():
+    """A synthetic clip: a textured square moving 1 px a frame on a flat background; a generated video that moves
+    it half as far has relative displacement error 0.5 (velocity error 0.5 too); one that moves it exactly, 0."""
+    n, size = 24, 64
+    rng = np.random.default_rng(0)
+    patch = rng.integers(0, 255, (8, 8, 3), dtype=np.uint8)
+
+    def video(step: float) -> tuple[np.ndarray, np.ndarray]:
+        frames = np.full((n, size, size, 3), 120, np.uint8)
+        labels = np.zeros((n, size, size), np.uint8)
+        for t in range(n):
+            x = 10 + int(round(step * t))
+            frames[t, 20:28, x:x + 8] = patch
+            labels[t, 20:28, x:x + 8] = 1
+        return frames, labels
+
+    ref, labels = video(1.0)
+    track = object_track(ref, labels, 1, np.zeros_like(labels))
+    assert track.scorable
+    exact = relative_error(*positions(ref, track, np.arange(n)))
+    assert exact < 0.01 and fidelity(exact) == 100.0
+    half = relative_error(*positions(video(0.5)[0], track, np.arange(n)))
+    assert half == pytest.approx(0.5, abs=0.06) and fidelity(half) < 100.0
+    assert fidelity(X_ZERO) == 0.0 and fidelity(X_FULL) == 100.0
+
+
+def test_an_older_release_format_is_refused_with_the_command_that_rebuilds_it(suites_release, tmp_path):
+    old = tmp_path / "old"
+    shutil.copytree(suites_release, old, ignore=shutil.ignore_patterns(".cache", "t2_*", "t3_*", "t4_*"))
+    meta = json.loads((old / RELEASE_JSON).read_text())
+    meta["version"] = "0.2.0"
+    (old / RELEASE_JSON).write_text(json.dumps(meta))
+    with pytest.raises(ScoreError) as e:
+        score_submission(tmp_path / "none", old, tmp_path / "report", progress=False)
+    message = str(e.value)
+    assert "'0.2.0'" in message and "wsp build --platform maniskill --suite" in message and "\n" not in message
+
+
+def test_the_negatives_study_runs_and_writes_its_files(suites_release, tmp_path):
+    out = tmp_path / "study"
+    run = subprocess.run([sys.executable, "-m", "wsp_data.cli", "study", "t5-negatives", "--release",
+                          str(suites_release), "--out", str(out), "--limit", "2", "--quiet"],
+                         capture_output=True, text=True, timeout=900)
+    assert run.returncode == 0, run.stderr
+    data = json.loads((out / "t5_negatives.json").read_text())
+    rows = data["summary"]["maniskill"]["variants"]
+    assert rows["oracle"]["t5_mean"] == 100.0 and rows["static"]["t5_mean"] == 0.0
+    assert {r["variant"] for r in data["clips"]} == set(t5_negatives.variant_names())
+    assert (out / "t5_negatives.png").stat().st_size > 10_000 and "Goal met" in (out / "t5_negatives.md").read_text()
