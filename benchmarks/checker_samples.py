@@ -1,7 +1,8 @@
 """The T5 label judge's reference check, drawn many times: tiny T5 builds of 8 references on scenes that no judge
 was trained, tuned or measured on (`--seed-range private`, one build seed per sample, `wsp build --seed`),
-and the oracle's T5 on each, which is the judge's agreement averaged within primitive, then across primitives,
-as `wsp score` reports it. A sample passes at ≥ 90 (the check's bar for a sample of 8: every reference right).
+and the oracle's "primitive recognised" column on each, which is the judge's agreement averaged within primitive,
+then across primitives, as `wsp score` reports it beside T5. A sample passes at ≥ 90 (a sample of 8: every
+reference right).
 
     .venv/bin/python benchmarks/checker_samples.py --platform maniskill --seeds 101 102 103 --out DIR [--workers 2]
 
@@ -46,7 +47,7 @@ def build(platform: str, seed: int, out: Path, count: int, workers: int) -> Path
 
 
 def judge_sample(release: Path, platform: str, judge) -> tuple[float, list[dict]]:
-    """The oracle's T5 on one sample (T5's score per reference, averaged within primitive, then across) and every
+    """The oracle's "primitive recognised" on one sample (the judge's score per reference, averaged within primitive, then across) and every
     reference's verdict."""
     verdicts = []
     for clip in t5_clips(release, f"t5_{platform}", ("reference",)):
