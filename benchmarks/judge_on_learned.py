@@ -1,5 +1,4 @@
-"""The T5 label judge on a learned model's videos, against labels given by eye (docs/validity.md, Primitive
-recognition).
+"""T5's score and the label judge on a learned model's videos, against labels given by eye (docs/validity.md, T5).
 
 A generated video has no simulator state, so the judge's verdict on it can only be checked by looking. Two steps,
 run from a folder holding the releases and the submissions (paths are kept as given, relative ones relative to it):
@@ -8,7 +7,8 @@ run from a folder holding the releases and the submissions (paths are kept as gi
     #    object's frame-0 position ringed, in a shuffled order under anonymous ids; no primitive, no verdict
     .venv/bin/python benchmarks/judge_on_learned.py sheets --out SHEETS RELEASE:SUBMISSION [RELEASE:SUBMISSION ...]
     # ... label every sheet in SHEETS/labels.csv by eye (columns below), then:
-    # 2. the judge's verdict on each clip (the default backend, as `wsp score` runs it) against the labels
+    # 2. T5's score (credited at ≥ 50) and the judge's verdict on each clip (the default backends, as `wsp score`
+    #    runs them) against the labels
     .venv/bin/python benchmarks/judge_on_learned.py compare SHEETS [--json OUT]
 
 labels.csv columns: `id`; `moved` (the ringed object: `yes` it visibly moves or changes pose, `no` it stays,
@@ -38,12 +38,15 @@ from wsp_eval.backends import BackendSpec, make
 from wsp_eval.backends.judge import PRIMITIVES, sample_frames
 from wsp_eval.release_format import split_config
 from wsp_eval.submission import VIDEO_NAME
+from wsp_eval.suites import t5
+from wsp_eval.suites.reference import InstanceReference
 from wsp_eval.tracking import frame_xy
 from wsp_eval.video import read_video
 
 TILE = 160
 LABEL_FIELDS = ("id", "moved", "primitive", "robot")
 MOVED = ("yes", "no", "vanished", "unclear")
+PASS = 50.0  # T5 credits a clip scoring at least this
 
 
 def _clips(pairs: list[str]) -> list[dict]:
@@ -114,13 +117,25 @@ def _kind(row: dict) -> str:
     return "accepted" if row["eye"] == "accept" else "another primitive"
 
 
+def _t5_score(clip: dict, backends) -> float:
+    """T5's score of the clip's whole video against its instance's reference, as `wsp score` computes it."""
+    config = Path(clip["release"]) / clip["config"]
+    row = next(r for r in pq.read_table(config / "instances.parquet").to_pylist()
+               if r["episode_ids"][0] == clip["episode"])
+    ref = InstanceReference(config, row)
+    video, fps = read_video(Path(clip["submission"], clip["config"], clip["episode"],
+                                 VIDEO_NAME.format(seed=clip["seed"])))
+    return t5.score_seed(t5.prepare(ref, backends), {"reference": (video, fps)}, backends)[0]
+
+
 def compare(folder: Path, out: Path | None) -> None:
     key = json.loads((folder / "key.json").read_text())
     labels = {r["id"]: r for r in csv.DictReader((folder / "labels.csv").open())}
     missing = [cid for cid in key if not labels.get(cid, {}).get("primitive")]
     if missing:
         raise SystemExit(f"{folder / 'labels.csv'}: {len(missing)} clips unlabelled (first: {missing[0]})")
-    judge = make(BackendSpec(), ("judge",)).judge
+    backends = make(BackendSpec(), t5.NEEDS)
+    judge = backends.judge
     rows = []
     for cid, clip in key.items():
         lab = labels[cid]
@@ -132,22 +147,26 @@ def compare(folder: Path, out: Path | None) -> None:
         accepted = v.label == clip["primitive"] and v.agent_ok and v.object_ok
         rows.append({"id": cid, "config": clip["config"], "intended": clip["primitive"], "eye_moved": lab["moved"],
                      "eye_primitive": lab["primitive"], "eye_robot": lab["robot"], "eye": _eye(lab, clip["primitive"]),
-                     "judged": v.label, "agent_ok": v.agent_ok, "object_ok": v.object_ok, "judge_accepts": accepted})
+                     "judged": v.label, "agent_ok": v.agent_ok, "object_ok": v.object_ok, "judge_accepts": accepted,
+                     "t5": round(score := _t5_score(clip, backends), 2), "t5_accepts": score >= PASS})
     for config in sorted({r["config"] for r in rows}):
         rs = [r for r in rows if r["config"] == config]
-        print(f"\n{config}: {len(rs)} clips; T5 by the judge {100 * sum(r['judge_accepts'] for r in rs) / len(rs):.1f}")
-        print("  | by eye | clips | judge accepts | judged label (object_ok) |")
-        print("  |---|---:|---:|---|")
+        print(f"\n{config}: {len(rs)} clips; T5 {np.mean([r['t5'] for r in rs]):.1f}; primitive recognised (judge) "
+              f"{100 * sum(r['judge_accepts'] for r in rs) / len(rs):.1f}")
+        print(f"  | by eye | clips | T5 credits (≥ {PASS:g}) | judge accepts | judged label (object_ok) |")
+        print("  |---|---:|---:|---:|---|")
         for kind in ("stays", "vanishes", "moves, primitive unclear", "unclear", "accepted", "another primitive"):
             ks = [r for r in rs if _kind(r) == kind]
             if ks:
                 judged = Counter(f"{r['judged']} ({'y' if r['object_ok'] else 'n'})" for r in ks)
-                print(f"  | {kind} | {len(ks)} | {sum(r['judge_accepts'] for r in ks)} | "
+                print(f"  | {kind} | {len(ks)} | {sum(r['t5_accepts'] for r in ks)} | {sum(r['judge_accepts'] for r in ks)} | "
                       f"{', '.join(f'{k} {n}' for k, n in judged.most_common())} |")
         decided = [r for r in rs if r["eye"] != "undecided"]
         agree = sum(r["judge_accepts"] == (r["eye"] == "accept") for r in decided)
+        t5_agree = sum(r["t5_accepts"] == (r["eye"] == "accept") for r in decided)
         if decided:
-            print(f"  decided by eye: {len(decided)}; the judge's verdict agrees on {agree} ({100 * agree / len(decided):.1f} %)")
+            print(f"  decided by eye: {len(decided)}; T5 agrees on {t5_agree} ({100 * t5_agree / len(decided):.1f} %), "
+                  f"the judge's verdict on {agree} ({100 * agree / len(decided):.1f} %)")
         wrong = [f"{r['id']} ({r['intended']}, judged {r['judged']}, eye {_kind(r)})" for r in decided
                  if r["judge_accepts"] != (r["eye"] == "accept")]
         print(f"  disagreements: {', '.join(wrong) or 'none'}")

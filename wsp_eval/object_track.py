@@ -11,16 +11,20 @@ frame nearest in time, spec §4.1):
    (smoothed alike; masked sum of squared differences, sub-pixel by a parabola through the minimum and its
    neighbours) inside the search region: the box of the reference's templates grown by `MARGIN` template sizes.
    A video without the object there matches it somewhere else in the region, or at the place it stayed.
-3. Two relative errors over the used frames, each against the reference's own motion:
-   - displacement: x_d = RMS_t ‖(p̂_t − p̂_0) − (p*_t − p*_0)‖ / RMS_t ‖p*_t − p*_0‖ (p_0: the first used frame; a
-     constant offset of the match, as blur gives, cancels);
-   - velocity over `LAG` frames: x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖, over
-     the used frames t whose t + L is used too (a jump where the reference glides fails here);
-   x = max(x_d, x_v); fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1).
-   A static video (the object where it started) has x_d = 1 and scores 0, as does one whose object vanishes or lags
-   far behind; a video whose object moves where the reference's rests has errors where the reference has none.
-4. A reference is scorable when max_t ‖p*_t − p*_0‖ ≥ `MIN_TRAVEL` (per 128 px of frame height) over at least two
-   used frames: the T5 builder drops the others, as RMFA's suites drop a reference without a scorable window.
+3. Relative errors, against the reference's own motion, over the used frames (p_0: the first used frame):
+   - an object whose image travels at least `MIN_TRAVEL` (per 128 px of frame height): x = max(x_d, x_v), with the
+     displacement error x_d = RMS_t ‖(p̂_t − p̂_0) − (p*_t − p*_0)‖ / RMS_t ‖p*_t − p*_0‖ (a constant offset of the
+     match, as blur gives, cancels) and the velocity error over `LAG` frames
+     x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖ (a jump where the reference glides);
+   - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE` in the image):
+     x = x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is the angle of `ANGLES` at which the first
+     used template, turned, best matches the frame at the object's position (measured alike on both videos, on
+     frames smoothed only by `TURN_SMOOTH`; angles modulo a quarter turn).
+   fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
+   it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
+   where the reference's rests has errors where the reference has none.
+4. A reference is scorable when its object travels or turns so (`ObjectTrack.scorable`): the T5 builder drops the
+   others, as RMFA's suites drop a reference without a scorable window.
 
 The constants were chosen on training-range builds (ManiSkill and LIBERO, `--seed-range train`) against the
 generated-video negatives of `wsp study t5-negatives`; docs/validity.md reports them on sets built afterwards.
@@ -39,6 +43,9 @@ SMOOTH = 3.0  # px per 128 px of frame height: both videos are Gaussian-smoothed
 MARGIN = 2.0  # the search region: the reference templates' box grown by this many template sizes
 MIN_TRAVEL = 2.0  # px per 128 px of frame height: the reference object's image must move this far to be scorable
 LAG = 4  # frames (0.2 s at 20 Hz): the velocity error's step
+ANGLES = np.deg2rad(np.arange(-45.0, 45.1, 3.0))  # in-plane rotations tried (a box's image repeats every 90°)
+ROT_VISIBLE = 0.2  # rad: a reference whose object turns at least this far in the image is scored on rotation too
+TURN_SMOOTH = 1.0  # px per 128 px: the lighter smoothing the rotation is measured on (3 px leaves a blob)
 X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise and a 1 px blur stay below it)
 X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response of 30 % of the reference's is above)
 
@@ -59,6 +66,8 @@ class ObjectTrack(NamedTuple):
     templates: list[Template | None]
     size: tuple[int, int]  # (H, W) of the reference frames
     region: tuple[int, int, int, int]  # (x0, y0, x1, y1): where the generated video's object is looked for
+    turns: list[Template]  # the first used template turned by each of ANGLES
+    angles: np.ndarray  # θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)
 
     @property
     def used(self) -> list[int]:
@@ -73,9 +82,19 @@ class ObjectTrack(NamedTuple):
         return np.array([np.linalg.norm(self.templates[k].centre - start) for k in used])
 
     @property
-    def scorable(self) -> bool:
+    def moving(self) -> bool:
+        """Whether the reference object's image travels at least MIN_TRAVEL (and T5 scores its position)."""
         d = self.travel()
         return len(d) >= 2 and float(d.max()) >= MIN_TRAVEL * self.size[0] / 128
+
+    @property
+    def turning(self) -> bool:
+        """Whether the reference object turns visibly in the image (and T5 scores its rotation)."""
+        return len(self.angles) >= 2 and float(np.abs(quarter_turn(self.angles - self.angles[0])).max()) >= ROT_VISIBLE
+
+    @property
+    def scorable(self) -> bool:
+        return self.moving or self.turning
 
 
 def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.ndarray) -> ObjectTrack:
@@ -96,7 +115,48 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
         y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
         out.append(Template((int(x0), int(y0)), frame[y0:y1, x0:x1],
                             visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
-    return ObjectTrack(out, frames.shape[1:3], search_region(out, frames.shape[1:3]))
+    used = [k for k, t in enumerate(out) if t is not None]
+    turns = []
+    if used:
+        t0 = out[used[0]]
+        (x0, y0), (th, tw) = t0.origin, t0.mask.shape
+        turns = turned(t0._replace(pixels=smoothed(frames[used[0]], TURN_SMOOTH)[y0:y0 + th, x0:x0 + tw]))
+    angles = np.array([orientation(smoothed(frames[k], TURN_SMOOTH), turns, out[k].centre) for k in used])
+    return ObjectTrack(out, frames.shape[1:3], search_region(out, frames.shape[1:3]), turns, angles)
+
+
+def turned(t: Template) -> list[Template]:
+    """`t` turned about its centroid by each of ANGLES (colours linear, mask nearest); each result's `centre` is its
+    centroid's offset inside its own box, `origin` (0, 0)."""
+    h, w = t.mask.shape
+    side = int(np.ceil(np.hypot(h, w))) + 2
+    centre_in = t.centre - np.array(t.origin)
+    out = []
+    for a in ANGLES:
+        m = cv2.getRotationMatrix2D((float(centre_in[0]), float(centre_in[1])), float(np.rad2deg(a)), 1.0)
+        m[:, 2] += (side - 1) / 2 - centre_in  # the centroid lands at the canvas centre
+        pixels = cv2.warpAffine(t.pixels, m, (side, side), flags=cv2.INTER_LINEAR)
+        mask = cv2.warpAffine(t.mask, m, (side, side), flags=cv2.INTER_NEAREST)
+        out.append(Template((0, 0), pixels, mask, np.array([(side - 1) / 2, (side - 1) / 2])))
+    return out
+
+
+def orientation(frame: np.ndarray, turns: list[Template], centre: np.ndarray) -> float:
+    """The angle of ANGLES whose turned template best matches a smoothed frame with its centroid at `centre`
+    (within 1 px; masked SSD per mask pixel)."""
+    side = turns[0].mask.shape[0]
+    x0 = int(round(centre[0] - (side - 1) / 2)) - 1
+    y0 = int(round(centre[1] - (side - 1) / 2)) - 1
+    pad = side + 2
+    h, w = frame.shape[:2]
+    if x0 < 0 or y0 < 0 or x0 + pad > w or y0 + pad > h:
+        window = cv2.copyMakeBorder(frame, pad, pad, pad, pad, cv2.BORDER_REPLICATE)[y0 + pad:y0 + 2 * pad,
+                                                                                  x0 + pad:x0 + 2 * pad]
+    else:
+        window = frame[y0:y0 + pad, x0:x0 + pad]
+    costs = [float(cv2.matchTemplate(window, t.pixels, cv2.TM_SQDIFF, mask=t.mask).min()) / max(int(t.mask.sum()), 1)
+             for t in turns]
+    return float(ANGLES[int(np.argmin(costs))])
 
 
 def search_region(templates: list[Template | None], size: tuple[int, int]) -> tuple[int, int, int, int]:
@@ -110,9 +170,9 @@ def search_region(templates: list[Template | None], size: tuple[int, int]) -> tu
             min(size[1], max(b[2] for b in boxes) + grow), min(size[0], max(b[3] for b in boxes) + grow))
 
 
-def smoothed(frame: np.ndarray) -> np.ndarray:
-    """A frame (H, W, 3) as float32, Gaussian-smoothed by `SMOOTH` (scaled to its height)."""
-    return cv2.GaussianBlur(frame.astype(np.float32), (0, 0), SMOOTH * frame.shape[0] / 128)
+def smoothed(frame: np.ndarray, sigma: float = SMOOTH) -> np.ndarray:
+    """A frame (H, W, 3) as float32, Gaussian-smoothed by `sigma` px per 128 px of its height."""
+    return cv2.GaussianBlur(frame.astype(np.float32), (0, 0), sigma * frame.shape[0] / 128)
 
 
 def _subpixel(values: np.ndarray, i: int) -> float:
@@ -138,36 +198,60 @@ def locate(frame: np.ndarray, t: Template, region: tuple[int, int, int, int]) ->
     return np.array([x0 + x + dx, y0 + y + dy]) + (t.centre - np.array(t.origin))
 
 
-def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray
-              ) -> tuple[np.ndarray, np.ndarray, list[int]]:
-    """(p̂, p*, used): the object's position in a generated video and in the reference, (N, 2) px each, at the
-    reference's used frames within the common duration (`used`); `frame_idx[k]` is the generated frame shown at the
-    time of the reference's frame k."""
+class Positions(NamedTuple):
+    """The object in a generated video and in the reference at the reference's used frames within the common
+    duration: positions p̂, p* (N, 2) px, in-plane rotations θ̂, θ* (N,) rad, and the frames' indices."""
+
+    found: np.ndarray
+    reference: np.ndarray
+    turn: np.ndarray
+    reference_turn: np.ndarray
+    frames: list[int]
+
+
+def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
+    """Where and how turned a generated video shows the object; `frame_idx[k]` is its frame shown at the time of the
+    reference's frame k."""
     used = [k for k in track.used if k < len(frame_idx)]
     if not used:
         raise ValueError("the reference object is never in sight")
-    found = np.array([locate(smoothed(frames[frame_idx[k]]), track.templates[k], track.region) for k in used])
-    return found, np.array([track.templates[k].centre for k in used]), used
+    by_turn = not track.moving and track.turning  # an object turning in place: its rotation is what can be seen
+    found, turn = [], []
+    for k in used:
+        frame = frames[frame_idx[k]]
+        found.append(locate(smoothed(frame), track.templates[k], track.region))
+        turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, found[-1]) if by_turn else 0.0)
+    return Positions(np.array(found), np.array([track.templates[k].centre for k in used]), np.array(turn),
+                     quarter_turn(track.angles[: len(used)] - track.angles[0]) if by_turn else np.zeros(len(used)),
+                     used)
 
 
-def relative_error(found: np.ndarray, reference: np.ndarray, frames: list[int]) -> float:
-    """x = max(x_d, x_v) of positions p̂ and p* (N, 2) at the reference frames `frames` (module docstring, step 3)."""
-    moved = reference - reference[0]
+def relative_error(p: Positions) -> float:
+    """x = max(x_d, x_v) of an object whose image travels; x_r of one that turns in place (module docstring, step 3)."""
+    turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
+    if turned_by > 0:
+        return float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2))) / turned_by
+    moved = p.reference - p.reference[0]
     motion = float(np.sqrt(np.mean(np.sum(moved ** 2, axis=1))))
     if motion == 0:
-        raise ValueError("the reference object does not move: not a scorable reference")
-    x_d = _rms(found - found[0] - moved) / motion
-    at = {k: i for i, k in enumerate(frames)}
-    pairs = np.array([(at[k], at[k + LAG]) for k in frames if k + LAG in at], dtype=int).reshape(-1, 2)
-    if len(pairs) == 0:
-        return x_d
-    v_star = reference[pairs[:, 1]] - reference[pairs[:, 0]]
-    v_hat = found[pairs[:, 1]] - found[pairs[:, 0]]
-    speed = _rms(v_star)
-    return max(x_d, _rms(v_hat - v_star) / speed) if speed > 0 else x_d
+        raise ValueError("the reference object neither moves nor turns: not a scorable reference")
+    x = _rms(p.found - p.found[0] - moved) / motion
+    at = {k: i for i, k in enumerate(p.frames)}
+    pairs = np.array([(at[k], at[k + LAG]) for k in p.frames if k + LAG in at], dtype=int).reshape(-1, 2)
+    v_star = p.reference[pairs[:, 1]] - p.reference[pairs[:, 0]]
+    if len(pairs) and (speed := _rms(v_star)) > 0:
+        x = max(x, _rms(p.found[pairs[:, 1]] - p.found[pairs[:, 0]] - v_star) / speed)
+    return x
+
+
+def quarter_turn(angle: np.ndarray) -> np.ndarray:
+    """Angles (rad) wrapped into [−π/4, π/4): a box's image looks the same a quarter turn on."""
+    return (np.asarray(angle) + np.pi / 4) % (np.pi / 2) - np.pi / 4
 
 
 def _rms(v: np.ndarray) -> float:
+    if len(v) == 0:
+        return 0.0
     return float(np.sqrt(np.mean(np.sum(v ** 2, axis=1))))
 
 

@@ -65,7 +65,7 @@ def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
     duration = min(prepared.duration, clip_duration(len(frames), fps))
     ref_times = timestamps(prepared.ref.num_frames("reference"), prepared.ref.fps)
     shown = nearest_indices(timestamps(len(frames), fps), ref_times[ref_times <= duration + 1e-9])
-    x = relative_error(*positions(frames, prepared.track, shown))
+    x = relative_error(positions(frames, prepared.track, shown))
     object_fidelity = fidelity(x)
     arm_ref = prepared.arm(duration)
     arm = mean_window_score(score_windows(video_flows(frames, fps, duration, backends.flow, arm_ref.needed),
