@@ -17,9 +17,10 @@ frame nearest in time, spec §4.1):
      match, as blur gives, cancels) and the velocity error over `LAG` frames
      x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖ (a jump where the reference glides);
    - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE` in the image):
-     x = x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is the angle of `ANGLES` at which the first
-     used template, turned, best matches the frame at the object's position (measured alike on both videos, on
-     frames smoothed only by `TURN_SMOOTH`; angles modulo a quarter turn).
+     x = max(x_r, RMS_t ‖p̂_t − p*_t‖ / MIN_TRAVEL) with x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is
+     the angle of `ANGLES` at which the first used template, turned, best matches the frame at the object's
+     position (measured alike on both videos, on frames smoothed only by `TURN_SMOOTH`; angles modulo a quarter
+     turn): it must turn as the reference's does and stay where the reference's is.
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -207,6 +208,7 @@ class Positions(NamedTuple):
     turn: np.ndarray
     reference_turn: np.ndarray
     frames: list[int]
+    scale: float  # frame height / 128
 
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
@@ -223,14 +225,15 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
         turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, found[-1]) if by_turn else 0.0)
     return Positions(np.array(found), np.array([track.templates[k].centre for k in used]), np.array(turn),
                      quarter_turn(track.angles[: len(used)] - track.angles[0]) if by_turn else np.zeros(len(used)),
-                     used)
+                     used, track.size[0] / 128)
 
 
 def relative_error(p: Positions) -> float:
     """x = max(x_d, x_v) of an object whose image travels; x_r of one that turns in place (module docstring, step 3)."""
     turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
-    if turned_by > 0:
-        return float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2))) / turned_by
+    if turned_by > 0:  # turning in place: it must turn as the reference's and stay where the reference's is
+        x_r = float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2))) / turned_by
+        return max(x_r, _rms(p.found - p.reference) / (MIN_TRAVEL * p.scale))
     moved = p.reference - p.reference[0]
     motion = float(np.sqrt(np.mean(np.sum(moved ** 2, axis=1))))
     if motion == 0:
