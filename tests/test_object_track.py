@@ -63,9 +63,10 @@ def test_every_frame_has_exact_object_and_robot_masks(releases, platform):
         assert len(xs), f"{ref.row['instance_id']}: the evaluated object is not in sight at frame 0"
         h, w = objects.shape[1:]
         u, v = frame_xy(ref.row["object_pixel_256"], w, h)  # the stored frame-0 projection of its simulator pose
-        # the projected centre lies within the object's visible pixels' extent (a partly hidden object's
-        # visible part need not be centred on it)
-        assert xs.min() - 2 <= u <= xs.max() + 2 and ys.min() - 2 <= v <= ys.max() + 2
+        # the projected centre lies near the object's visible pixels: within the visible part's own size of its
+        # nearest pixel (a partly hidden object's visible part need not be centred on it)
+        size = max(xs.max() - xs.min(), ys.max() - ys.min()) + 2
+        assert np.hypot(xs - u, ys - v).min() <= size, (ref.row["instance_id"], (u, v), size)
 
 
 @pytest.mark.parametrize("platform", PLATFORMS)
