@@ -59,8 +59,10 @@ def test_every_frame_has_exact_object_and_robot_masks(releases, platform):
         assert objects.shape == robot.shape == ref.frames("reference").shape[:3]
         assert not ((robot > 0) & (objects > 0)).any()
         label = int(ref.row["evaluated_index"]) + 1
+        assert (objects == label).any(), f"{ref.row['instance_id']}: the evaluated object is never in sight"
         ys, xs = np.nonzero(objects[0] == label)
-        assert len(xs), f"{ref.row['instance_id']}: the evaluated object is not in sight at frame 0"
+        if not len(xs):
+            continue  # hidden at frame 0 (behind another object): nothing to compare the projection with
         h, w = objects.shape[1:]
         u, v = frame_xy(ref.row["object_pixel_256"], w, h)  # the stored frame-0 projection of its simulator pose
         # the projected centre lies near the object's visible pixels: within the visible part's own size of its
