@@ -140,10 +140,11 @@ def test_mask_and_camera_agree_with_the_scene(render):
     assert ob.mask[v - 1:v + 2, u - 1:u + 2].max() == MASK_DISTAL
     # a task object's centre projects within 2 px of the centroid of its own segmentation in frame 0's object
     # labels (tolerance: its body origin is its centre of mass to within a few mm, ~1 px at this distance); no
-    # object label lies on the robot, and a step's observation carries none (frame 0 only)
+    # object label lies on the robot, and every step's observation carries the label image too
     ys, xs = np.nonzero(ob.objects == 1)
     assert len(xs) > 30 and not (ob.objects[ob.mask > 0]).any()
-    assert render.step(np.zeros(7)).objects is None
+    stepped = render.step(np.zeros(7))
+    assert stepped.objects.shape == (128, 128) and not stepped.objects[stepped.mask > 0].any()
     assert np.linalg.norm(project(ob.object_poses[0, :3]) - [xs.mean(), ys.mean()]) < 2.0
 
 
