@@ -23,8 +23,9 @@ def _rollout(role: str, seed: int) -> RolloutArrays:
     y, x = np.mgrid[:info.height, :info.width]
     rgb = np.stack(np.broadcast_arrays((x + 7 * t + seed) % 256, (y + 3 * t) % 256, (x + y + 11 * seed) % 256), -1)
     mask = ((x + t) % 64 < 20).astype(np.uint8)
+    objects = ((y + t) % 48 < 10).astype(np.uint8)  # object 0's label where it is seen
     state = np.random.default_rng(seed).normal(size=(FRAMES, 14)).astype(np.float32)
-    return RolloutArrays(role, seed, rgb.astype(np.uint8), mask, state, state, np.zeros((FRAMES, 4, 7), np.float32),
+    return RolloutArrays(role, seed, rgb.astype(np.uint8), mask, objects, state, state, np.zeros((FRAMES, 4, 7), np.float32),
                          np.zeros((FRAMES, 4), bool), np.arange(FRAMES) == FRAMES - 1, state[1:], state[1:],
                          np.eye(3, dtype=np.float32), np.eye(3, 4, dtype=np.float32))
 
