@@ -63,6 +63,11 @@ def build_config(out: Path, suite: str, platform: str, count: int, tasks: tuple[
 
     result = build(BuildConfig(suite, platform, count, tuple(tasks), **config), out, progress=False)
     assert result.assembled or result.up_to_date, f"{suite}_{platform} did not assemble"
+    if result.report and not result.up_to_date:  # the prebuild's log shows where its time goes
+        r = result.report
+        print(f"[tiny releases]   {r['config']}: {result.seconds:.0f} s, kept {r['kept']}/{r['requested']} of "
+              f"{r['proposed']} proposals, {result.rendered_steps} rendered steps, dropped {r['dropped'] or 'none'}",
+              flush=True)
     return out
 
 
