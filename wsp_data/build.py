@@ -26,6 +26,7 @@ from wsp_data.release import ReleaseError, load_release, record_build, write_rel
 from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
 from wsp_data.writer import write_config
+from wsp_eval import folder_lock
 from wsp_eval.console import library_output_to, terminal
 from wsp_eval.release_format import BENCHMARK_VERSION
 
@@ -274,8 +275,18 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
         existing = load_release(out)["configs"].get(config.name)
         if existing and existing["build_config"] == config.to_json() and (out / config.name).exists():
             return BuildResult(config, out, 0, 0, 0, False, 0.0, 0, up_to_date=True)
-    shard_tag = "" if total == 1 else f"_shard{index}of{total}"  # concurrent shards: one log each
+    shard_tag = "" if total == 1 else f"_shard{index}of{total}"  # concurrent shards: one log and one lock each
     log = out / LOG_DIR / f"build_{config.name}{shard_tag}.log"
+    try:
+        with folder_lock.exclusive(out / LOG_DIR, f"wsp build {config.name}{shard_tag}",
+                                   f"build_{config.name}{shard_tag}.lock"):
+            return _build_locked(config, out, index, total, workers, restart, progress, executor, address, log)
+    except folder_lock.FolderBusy as e:
+        raise BuildError(f"{e} (this config{' shard' if total > 1 else ''} is being built by it)") from None
+
+
+def _build_locked(config: BuildConfig, out: Path, index: int, total: int, workers: int, restart: bool,
+                  progress: bool, executor: str, address: str | None, log: Path) -> BuildResult:
     with library_output_to(log):
         staging = open_staging(out, config, restart)
         t0 = time.perf_counter()
@@ -291,7 +302,12 @@ def build(config: BuildConfig, out: Path, *, shard: tuple[int, int] = (0, 1), wo
             bar.set_postfix(kept=kept, dropped=decided - kept, accept=f"{kept / max(1, proposed):.0%}")
         bar.close()
         remaining = sum(not staging.is_decided(k) for k in range(config.count))
-        report = assemble(config, out, staging, workers, progress) if remaining == 0 else None
+        report = None
+        if remaining == 0:  # one assembly at a time into a release: each rewrites release.json
+            with folder_lock.exclusive(out / LOG_DIR, f"wsp build {config.name} (assembling)", "assemble.lock",
+                                       wait=True):
+                if staging.root.exists():  # else another shard of this config has just assembled it
+                    report = assemble(config, out, staging, workers, progress)
     return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
                        steps, report, log=log)
 

@@ -4,6 +4,7 @@
     wsp info DIR                                                     what a release holds
     wsp sources [--seeds N]                                          scripted expert success per task
     wsp validate SUBMISSION --release DIR                            check a submission, score nothing
+    wsp verify DIR                                                   check every release file against release.json
     wsp baseline NAME --release DIR --out SUBMISSION                 write a calibration-baseline submission
     wsp generate --model MODULE:CALLABLE --release DIR --out SUB     run a model over a release → submission
     wsp score SUBMISSION --release DIR --out REPORT_DIR              score a submission: JSON, Markdown, HTML
@@ -100,6 +101,10 @@ def parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="check a submission against a release without scoring it")
     v.add_argument("submission", type=Path)
     v.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    ve = sub.add_parser("verify", help="check every file of a release against its sha256 in release.json")
+    ve.add_argument("release", type=Path)
+    ve.add_argument("--configs", nargs="+", help="only these configs (default: every config release.json lists)")
+    ve.add_argument("--quiet", action="store_true", help="no progress bar")
     bl = sub.add_parser("baseline", help="write a calibration-baseline submission (oracle, static, action_blind, …)")
     bl.add_argument("name")
     bl.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
@@ -292,10 +297,28 @@ def cmd_validate(args) -> int:
     from wsp_eval.submission import validate
 
     problems = validate(args.submission, _release_or_error(args.release))
-    for p in problems:
-        print(f"{args.submission}/{p}")
+    for p in problems:  # a release file's problem names it by its full path
+        print(p if Path(p.path).is_absolute() else f"{args.submission}/{p}")
     print(f"{len(problems)} problem(s) in {args.submission}" if problems else f"{args.submission}: valid")
     return 1 if problems else 0
+
+
+def cmd_verify(args) -> int:
+    from wsp_eval.integrity import check, repair
+
+    release = _release_or_error(args.release)
+    prints, problems = check(release, args.configs, unlisted=True, progress=not args.quiet)
+    for p in problems:
+        print(f"{release / p.path}: {p.reason}")
+    if problems:
+        print(f"{len(problems)} file(s) of {release} differ from release.json, the release as built")
+        for config in sorted({p.path.split("/", 1)[0] for p in problems}):
+            print(f"  fix: {repair(release, config)}")
+        return 1
+    for config, fp in prints.items():
+        print(f"{config}: fingerprint {fp[:16]}")
+    print(f"{release}: every file of {len(prints)} config(s) matches release.json")
+    return 0
 
 
 def cmd_baseline(args) -> int:
@@ -488,7 +511,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args = parser().parse_args(argv)
         commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
-                    "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
+                    "verify": cmd_verify, "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
                     "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate,
                     "leaderboard": cmd_leaderboard, "export-inputs": cmd_export_inputs}
         return commands[args.command](args)

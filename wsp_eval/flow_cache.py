@@ -1,9 +1,10 @@
 """Reference-flow cache: the reference side of RMFA (T2, T3), computed once per release and flow backend and
 reused by every later scoring of any submission (it was ≈ 40 % of T2's scoring time).
 
-Key: the SHA-256 of the release's `release.json` (which lists every file's checksum), the flow backend's name
-and version, and the source of `wsp_eval/flow.py` with this module's format number, so a rebuilt release,
-another evaluator or changed RMFA code never reads stale flows. Location: `<release>/.cache/
+Key: the flow backend's name and version and the source of `wsp_eval/flow.py` with this module's format number,
+so another evaluator or changed RMFA code never reads stale flows; each config's entries sit in
+`<config>@<fingerprint>/` (`wsp_eval.reference_cache.entry_folder`), named by the config's verified content, so a
+rebuilt or changed config never meets its old flows. Location: `<release>/.cache/
 reference_flows/<key>/` when the release folder is writable (`release.json` ignores `.cache`), otherwise
 `$XDG_CACHE_HOME/worldsimprobe/reference_flows/<key>/` (default `~/.cache`). One file per (config, episode,
 common duration), named by the number of 5 Hz samples the duration holds (what the flows depend on), written
@@ -37,7 +38,8 @@ def cache_dir(release: Path, backend_name: str, backend_version: str) -> Path | 
 
 def load_or_compute(folder: Path, config: str, episode: int, duration: float,
                     compute: Callable[[], ReferenceFlows]) -> ReferenceFlows:
-    """The cached reference flows of (config, episode, duration), or `compute()` stored for the next scoring."""
+    """The cached reference flows of (config, episode, duration) (`config`: the entry folder), or `compute()`
+    stored for the next scoring."""
     samples = len(sample_times(duration))
     path = Path(folder) / config / ENTRY.format(episode=episode, samples=samples)
     try:

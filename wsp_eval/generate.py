@@ -40,6 +40,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from tqdm import tqdm
 
+from wsp_eval import folder_lock
 from wsp_eval.console import terminal
 from wsp_eval.episode import EpisodeContext
 from wsp_eval.registry import Registry
@@ -159,11 +160,20 @@ def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds:
                      info: dict | None = None) -> GenerateResult:
     """Write `produce(contexts)` (a list of frames per list of up to `batch_size` episode contexts) for every
     scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`, skipping videos already there, then
-    submission.json."""
+    submission.json; `out` is held by this process alone (`wsp_eval.folder_lock`)."""
     release, out = Path(release), Path(out)
     seeds, configs = _check_seeds(seeds), _check_configs(release, configs)
     if not isinstance(name, str) or not name:
         raise GenerateError(f"model name must be a non-empty string, got {name!r}")
+    try:
+        with folder_lock.exclusive(out, "wsp generate"):
+            return _write_locked(produce, release, out, seeds, configs, name, progress, batch_size, info)
+    except folder_lock.FolderBusy as e:
+        raise GenerateError(str(e)) from None
+
+
+def _write_locked(produce: BatchProducer, release: Path, out: Path, seeds: list[int], configs: list[str],
+                  name: str, progress: bool, batch_size: int, info: dict | None) -> GenerateResult:
     before = _previous_seconds(out, name)
     written = skipped = 0
     seconds = 0.0

@@ -1,7 +1,7 @@
 """`wsp leaderboard`: models × (platform, suite, Overall) from any number of score reports (`wsp score`).
 
 Comparable reports only: the main table holds the reports made against the same release (`release.json`
-checksum), benchmark version and evaluators (backend names and versions) as the first one given; every other
+checksum and the fingerprints of the configs scored, `wsp_eval.integrity`), benchmark version and evaluators (backend names and versions) as the first one given; every other
 report goes to a table of its own, headed by what differs, never mixed in. Scores and 95 % CIs are the reports'
 own. **Ties**: within each column the models are ranked by score, and a model whose difference to the one ranked
 just above it is not significant shares its rank ("=") — a paired bootstrap over the instances both reports
@@ -45,7 +45,8 @@ class Entry:
     def key(self) -> tuple:
         rel = self.report.get("release", {})
         backends = tuple(sorted((r, b["name"], b["version"]) for r, b in self.report.get("backends", {}).items()))
-        return rel.get("release_json_sha256"), rel.get("version"), backends
+        content = tuple(sorted((c, v.get("fingerprint")) for c, v in rel.get("configs", {}).items()))
+        return (rel.get("release_json_sha256"), content), rel.get("version"), backends
 
     def scores(self, config: str) -> dict[str, tuple[float, str]]:
         return {r["instance_id"]: (float(r["score"]), str(r.get("group", ""))) for r in self.report["instances"]
@@ -155,7 +156,8 @@ def build(paths: list[Path]) -> dict:
     for key, members in groups.items():
         if key == main_key:
             continue
-        why = [w for w, x, y in (("release", key[0], main_key[0]), ("benchmark version", key[1], main_key[1]),
+        why = [w for w, x, y in (("release" if key[0][0] != main_key[0][0] else "release files scored", key[0],
+                                  main_key[0]), ("benchmark version", key[1], main_key[1]),
                                  ("evaluators", key[2], main_key[2])) if x != y]
         apart.append({"differs_in": why, **table(members)})
     return {"main": table(groups[main_key]), "not_comparable": apart}

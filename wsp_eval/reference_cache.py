@@ -6,11 +6,14 @@ computed once and reused by every later scoring of any submission: RMFA's refere
 reference; T5: the judge's verdict on the reference), which spared every scoring of T4 and T5 decoding and
 tracking or judging each reference (docs/performance.md).
 
-A folder is named by a key: the SHA-256 of the release's `release.json` (which lists every file's checksum) and
-what else the entries depend on, so a rebuilt release, another backend or changed scoring code never reads
-stale entries. Location: `<release>/.cache/<kind>/<key>/` when the release folder is writable (`release.json`
-ignores `.cache`), otherwise `$XDG_CACHE_HOME/worldsimprobe/<kind>/<key>/` (default `~/.cache`); no writable
-place only costs the cache. Entries are written atomically; an unreadable one is recomputed and rewritten.
+A folder is named by a key: the SHA-256 of what the entries depend on besides the release (the evaluator and the
+scoring code), so another backend or changed scoring code never reads stale entries. Inside it, each config's
+entries sit in `<config>@<fingerprint>/`, the fingerprint of the config's verified files
+(`wsp_eval.integrity`): a rebuilt or changed config never meets the entries of its old content, and the same
+content at another path shares them. Location: `<release>/.cache/<kind>/<key>/` when the release folder is
+writable (`release.json` ignores `.cache`), otherwise `$XDG_CACHE_HOME/worldsimprobe/<kind>/<key>/` (default
+`~/.cache`); no writable place only costs the cache. Entries are written atomically; an unreadable one is
+recomputed and rewritten.
 """
 
 from __future__ import annotations
@@ -23,7 +26,6 @@ from collections.abc import Callable, Iterable
 from functools import lru_cache
 from pathlib import Path
 
-from wsp_eval.release_format import RELEASE_JSON
 
 RESULTS = "reference_results"
 RESULTS_FORMAT = 1  # bump when a result entry's layout changes
@@ -31,10 +33,10 @@ RESULT_ENTRY = "{episode:06d}.json"
 
 
 def cache_folder(release: Path, kind: str, key_parts: Iterable[bytes]) -> Path | None:
-    """The folder (created) of `kind` entries for this release and key, in the release when writable, else in
-    the user's cache; None when neither can be written."""
+    """The folder (created) of `kind` entries for this key, in the release when writable, else in the user's
+    cache; None when neither can be written."""
     release = Path(release)
-    h = hashlib.sha256((release / RELEASE_JSON).read_bytes())
+    h = hashlib.sha256(kind.encode())
     for part in key_parts:
         h.update(b"\0" + part)
     key = h.hexdigest()[:24]
@@ -91,9 +93,14 @@ def _scoring_source() -> str:
     return h.hexdigest()
 
 
+def entry_folder(config: str, fingerprint: str) -> str:
+    """The subfolder of a config's entries: its name and its content's fingerprint."""
+    return f"{config}@{fingerprint[:16]}" if fingerprint else config
+
+
 def load_or_compute_result(folder: Path, config: str, episode: int, compute: Callable[[], dict]) -> dict:
-    """The cached JSON result of (config, episode), or `compute()` (JSON-ready; floats round-trip exactly)
-    stored for the next scoring."""
+    """The cached JSON result of (config, episode) (`config`: the entry folder, `entry_folder`), or `compute()`
+    (JSON-ready; floats round-trip exactly) stored for the next scoring."""
     path = Path(folder) / config / RESULT_ENTRY.format(episode=episode)
     try:
         cached = json.loads(path.read_text())

@@ -65,20 +65,22 @@ class ReleaseError(RuntimeError):
     """A folder that is not (or not yet) a readable WorldSimProbe release."""
 
 
+def rebuild_command(root: Path, name: str, entry: dict) -> str:
+    """The `wsp build` command of config `name` from its `release.json` entry (its recorded build config)."""
+    c = entry.get("build_config", {})
+    args = [f"--platform {c.get('platform', split_config(name)[1])}", f"--suite {c.get('suite', split_config(name)[0])}"]
+    args += [f"--count {c['count']}"] if c.get("count") else []
+    args += [f"--tasks {' '.join(c['tasks'])}"] if c.get("tasks") else []
+    args += [f"--seed {c['seed']}"] if c.get("seed") else []
+    args += [f"--seed-range {c['seed_range']}"] if c.get("seed_range") else []
+    args += [f"--primitives {' '.join(c['primitives'])}"] if c.get("primitives") else []
+    return f"wsp build {' '.join(args)} --out {Path(root)}"
+
+
 def rebuild_commands(root: Path, release: dict) -> list[str]:
-    """The `wsp build` command of each config of a parsed `release.json`, from its recorded build config: what
-    rebuilds the release in this version's format."""
-    out = []
-    for name, entry in sorted(release.get("configs", {}).items()):
-        c = entry.get("build_config", {})
-        args = [f"--platform {c.get('platform', split_config(name)[1])}", f"--suite {c.get('suite', split_config(name)[0])}"]
-        args += [f"--count {c['count']}"] if c.get("count") else []
-        args += [f"--tasks {' '.join(c['tasks'])}"] if c.get("tasks") else []
-        args += [f"--seed {c['seed']}"] if c.get("seed") else []
-        args += [f"--seed-range {c['seed_range']}"] if c.get("seed_range") else []
-        args += [f"--primitives {' '.join(c['primitives'])}"] if c.get("primitives") else []
-        out.append(f"wsp build {' '.join(args)} --out {Path(root)}")
-    return out
+    """The `wsp build` command of each config of a parsed `release.json`: what rebuilds the release in this
+    version's format."""
+    return [rebuild_command(root, name, entry) for name, entry in sorted(release.get("configs", {}).items())]
 
 
 def format_problem(root: Path, release: dict) -> str | None:

@@ -1,6 +1,10 @@
 """`wsp score`: a submission against a release → per-instance results → suite, group and overall scores with
 95% bootstrap CIs (spec §6) → JSON, Markdown and HTML reports (`wsp_eval.report`).
 
+- The release as published: every file of the scored configs is checked against its SHA-256 in `release.json`
+  before anything is scored (`wsp_eval.integrity`; hashed once, remembered by size, mtime and inode); a mismatch
+  stops scoring with the file. Each config's fingerprint (its verified content) is in the report and keys the
+  reference caches. One `wsp score` at a time writes into an `--out` (`wsp_eval.folder_lock`).
 - Seeds are averaged per instance before anything else; a suite score is the mean over instances (T5: over
   primitives of the mean within each), Overall = unweighted mean of a platform's T1–T5, and the macro average
   is the mean over platforms.
@@ -41,13 +45,16 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from wsp_eval import backends as backend_registry
+from wsp_eval import folder_lock
 from wsp_eval.backends import BackendSpec, Backends
 from wsp_eval.console import terminal
 from wsp_eval.flow_cache import cache_dir
 from wsp_eval.reference import reference_size
+from wsp_eval.integrity import IntegrityError, release_json_sha256, verify
 from wsp_eval.reference_cache import results_folder
-from wsp_eval.release_format import INSTANCES, RELEASE_JSON, format_problem, load_release, split_config
-from wsp_eval.submission import SUBMISSION_JSON, Expected, check_sizes, load_video, test_configs, validate
+from wsp_eval.release_format import INSTANCES, format_problem, load_release, split_config
+from wsp_eval.submission import (SUBMISSION_JSON, Expected, check_sizes, load_video, named_configs, test_configs,
+                                 validate)
 from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
@@ -81,6 +88,7 @@ class Job:
     flow_cache: str | None = None  # the release's reference-flow cache folder (`wsp_eval.flow_cache`), if used
     result_cache: str | None = None  # the suite's reference-result cache folder (`wsp_eval.reference_cache`), if used
     size: tuple[int, int] | None = None  # (H, W) of the config's reference video: the resolution required
+    fingerprint: str = ""  # the config's verified content (`wsp_eval.integrity`): names its reference-cache entries
 
 
 # -- one instance -----------------------------------------------------------------------------------------------
@@ -123,7 +131,8 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
     backends = _backends(spec, module.NEEDS)
     ref = InstanceReference(Path(job.release) / job.config, job.row,
                             flow_cache=Path(job.flow_cache) if job.flow_cache else None,
-                            result_cache=Path(job.result_cache) if job.result_cache else None)
+                            result_cache=Path(job.result_cache) if job.result_cache else None,
+                            fingerprint=job.fingerprint)
     prepared = module.prepare(ref, backends)
     seeds, problems = [], []
     for seed in job.seeds:
@@ -194,14 +203,13 @@ def _rows(release: Path, config: str) -> list[dict]:
 
 
 def _cache_key(submission: Path, release: Path, spec: BackendSpec, backends: backend_registry.Backends,
-               configs: list[str], accept_lossy: bool) -> dict:
-    """What the resume cache's records depend on: the inputs, the backends' names *and versions* (a retrained
-    judge keeps its name), the configs and the scoring version."""
+               fingerprints: dict[str, str], accept_lossy: bool) -> dict:
+    """What the resume cache's records depend on: the inputs (the configs by their verified content), the
+    backends' names *and versions* (a retrained judge keeps its name) and the scoring version."""
     manifest = (submission / SUBMISSION_JSON).read_bytes()
-    rel = (release / "release.json").read_bytes()
-    key = {"submission": hashlib.sha256(manifest).hexdigest(), "release": hashlib.sha256(rel).hexdigest(),
-           "backends": spec.to_json(), "versions": backends.describe(), "configs": configs,
-           "scoring_version": SCORING_VERSION}
+    key = {"submission": hashlib.sha256(manifest).hexdigest(), "release": release_json_sha256(release),
+           "backends": spec.to_json(), "versions": backends.describe(), "configs": list(fingerprints),
+           "content": fingerprints, "scoring_version": SCORING_VERSION}
     return {**key, "accept_lossy": True} if accept_lossy else key
 
 
@@ -229,7 +237,7 @@ def _preflight(submission: Path, release: Path, allow_missing: bool) -> tuple[di
     """The manifest and the configs to score; missing files stop here unless allowed."""
     if not submission.is_dir():
         raise ScoreError(f"{submission}: submission folder not found")
-    problems = validate(submission, release, check_videos=False)
+    problems = validate(submission, release, check_videos=False, verify_release=False)  # verified already
     fatal = [p for p in problems if p.path == SUBMISSION_JSON or p.fatal]
     missing = [p for p in problems if p not in fatal and p.message == "missing"]
     if fatal:
@@ -246,30 +254,47 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
                      workers: int = 1, allow_missing: bool = False, accept_lossy: bool = False,
                      progress: bool = True, reference_cache: bool = True, executor: str = "local",
                      address: str | None = None) -> dict:
-    """Score `submission` against `release`; write the reports under `out`; return the report dict. With
-    `reference_cache`, the reference side (RMFA's reference flows; T4's and T5's results on the reference) comes
-    from (and goes to) the release's reference caches. `executor`
-    "ray" scores on a Ray cluster (`address`, or a local instance with `workers` CPUs)."""
+    """Score `submission` against `release`; write the reports under `out`; return the report dict. Every
+    release file of the scored configs is first checked against `release.json` (`wsp_eval.integrity`); `out` is
+    held by this process alone (`wsp_eval.folder_lock`). With `reference_cache`, the reference side (RMFA's
+    reference flows; T4's and T5's results on the reference) comes from (and goes to) the release's reference
+    caches. `executor` "ray" scores on a Ray cluster (`address`, or a local instance with `workers` CPUs)."""
+    submission, release, out = Path(submission), Path(release), Path(out)
+    rel_meta = load_release(release)
+    if (problem := format_problem(release, rel_meta)) is not None:
+        raise ScoreError(problem)
+    try:  # before anything reads a config's files (a config absent from the folder is the preflight's to name)
+        fingerprints = verify(release, [c for c in named_configs(submission, release) if (release / c).is_dir()],
+                              progress=progress)
+    except IntegrityError as e:
+        raise ScoreError(str(e)) from None
+    meta, configs = _preflight(submission, release, allow_missing)
+    needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
+    backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
+    try:
+        with folder_lock.exclusive(out, "wsp score"):
+            return _score_verified(submission, release, out, rel_meta, meta, configs, fingerprints, spec, backends,
+                                   workers, allow_missing, accept_lossy, progress, reference_cache, executor, address)
+    except folder_lock.FolderBusy as e:
+        raise ScoreError(str(e)) from None
+
+
+def _score_verified(submission: Path, release: Path, out: Path, rel_meta: dict, meta: dict, configs: list[str],
+                    fingerprints: dict[str, str], spec: BackendSpec, backends: Backends, workers: int,
+                    allow_missing: bool, accept_lossy: bool, progress: bool, reference_cache: bool, executor: str,
+                    address: str | None) -> dict:
     from tqdm import tqdm
 
     from wsp_eval.report import write_reports
     from wsp_eval.strips import write_strips
 
-    submission, release, out = Path(submission), Path(release), Path(out)
-    rel_meta = load_release(release)
-    if (problem := format_problem(release, rel_meta)) is not None:
-        raise ScoreError(problem)
-    meta, configs = _preflight(submission, release, allow_missing)
-    needs = tuple(sorted({n for c in configs for n in SCORERS[split_config(c)[0]].NEEDS}))
-    backends = backend_registry.make(spec, needs)  # fail fast on a missing checkpoint or endpoint
-    out.mkdir(parents=True, exist_ok=True)
-    done = _open_cache(out, _cache_key(submission, release, spec, backends, configs, accept_lossy))
+    done = _open_cache(out, _cache_key(submission, release, spec, backends, fingerprints, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
     flows = _flow_cache(release, spec, backends) if reference_cache else None
     results = {c: _result_cache(release, c, spec, backends) if reference_cache else None for c in configs}
     sizes = {c: reference_size(release / c) for c in configs}
-    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, results[c], sizes[c])
-            for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
+    todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, results[c], sizes[c],
+                fingerprints[c]) for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]
     start = time.perf_counter()
     bar = tqdm(total=len(todo) + len(done), initial=len(done), desc="scoring", unit="instance", disable=not progress,
                file=terminal())
@@ -306,7 +331,8 @@ def score_submission(submission: Path, release: Path, out: Path, *, spec: Backen
                     "hardware": meta.get("hardware"), "generation_seconds": meta.get("generation_seconds")},
         release={"path": str(release), "version": rel_meta["version"],
                  "code_version": str(rel_meta.get("code_version", "")),
-                 "release_json_sha256": hashlib.sha256((release / RELEASE_JSON).read_bytes()).hexdigest()},
+                 "release_json_sha256": release_json_sha256(release),
+                 "configs": {c: {"fingerprint": fingerprints[c]} for c in configs}},
         backends=backends.describe(), reference_flow_cache=flows,
         reference_result_cache={c: results[c] for c in configs if results[c]},
         allow_missing=allow_missing, encoding_check=ENCODING_OFF if accept_lossy else ENCODING_ON,

@@ -23,6 +23,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 
+from wsp_eval.folder_lock import LOCK_NAME
+from wsp_eval.integrity import check as check_release, repair
 from wsp_eval.reference import reference_size
 from wsp_eval.release_format import INSTANCES, RELEASE_JSON
 from wsp_eval.video import MAX_FPS, MIN_FPS, VideoError, read_video
@@ -186,8 +188,29 @@ def _check_videos(sub: Path, todo: list[Expected]) -> list[Problem]:
     return problems + [p for group in sizes.values() for p in check_sizes(group)]
 
 
-def validate(submission: Path, release: Path, *, check_videos: bool = True) -> list[Problem]:
-    """Every problem of a submission against a release (empty list: valid)."""
+def release_problems(release: Path, configs: list[str]) -> list[Problem]:
+    """The files of `configs` that differ from the release's `release.json` (`wsp_eval.integrity`), as fatal
+    problems naming each file, the hashes and the fix."""
+    return [Problem(str(Path(release) / p.path), f"{p.reason}; {repair(release, p.path.split('/', 1)[0])}", fatal=True)
+            for p in check_release(release, configs)[1]]
+
+
+def named_configs(submission: Path, release: Path) -> list[str]:
+    """The configs a submission is to be scored on: its `submission.json`'s "configs" when that is a list of
+    names, else the release's test configs (a manifest that cannot be read is `validate`'s to report)."""
+    path = Path(submission) / SUBMISSION_JSON
+    try:
+        named = json.loads(path.read_text()).get("configs") if path.stat().st_size <= MAX_MANIFEST_BYTES else None
+    except (OSError, ValueError, AttributeError):
+        named = None
+    if isinstance(named, list) and named and all(isinstance(c, str) for c in named):
+        return named
+    return test_configs(release)
+
+
+def validate(submission: Path, release: Path, *, check_videos: bool = True, verify_release: bool = True) -> list[Problem]:
+    """Every problem of a submission against a release (empty list: valid); with `verify_release`, also every
+    file of the scored configs that differs from the release's `release.json`."""
     sub = Path(submission)
     if not sub.is_dir():
         return [Problem(str(sub), "submission folder not found")]
@@ -204,9 +227,11 @@ def validate(submission: Path, release: Path, *, check_videos: bool = True) -> l
                                    f"{RELEASE_JSON} lists {c} (a partial download?); fetch that config, or name only "
                                    f"the configs you score in {SUBMISSION_JSON}'s \"configs\"", fatal=True)
                            for c in absent]
+    if verify_release and (damaged := release_problems(release, configs)):
+        return problems + damaged  # a changed release is nothing to check a submission against
     expected = {e.relpath: e for e in expected_videos(release, configs, meta["seeds"])}
     present = {_shown(p, sub) for p in sub.rglob("*") if p.is_file() and not p.is_symlink()}
-    present.discard(SUBMISSION_JSON)
+    present -= {SUBMISSION_JSON, LOCK_NAME}
     for rel in sorted(set(expected) - present):
         problems.append(Problem(rel, "missing"))
     for rel in sorted(present - set(expected)):

@@ -12,7 +12,7 @@ import numpy as np
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
 from wsp_eval.reference import iter_reference_frames, reference_masks, reference_object_masks
-from wsp_eval.reference_cache import load_or_compute_result
+from wsp_eval.reference_cache import entry_folder, load_or_compute_result
 from wsp_eval.release_format import split_config
 
 
@@ -25,6 +25,7 @@ class InstanceReference:
     row: dict
     flow_cache: Path | None = None  # this release's and flow backend's reference-flow cache (`flow_cache`)
     result_cache: Path | None = None  # this release's and suite's reference-result cache (`reference_cache`)
+    fingerprint: str = ""  # the config's verified content (`wsp_eval.integrity`): names its cache entries
     _cache: dict = field(default_factory=dict, repr=False)
 
     def episode(self, role: str) -> int:
@@ -100,8 +101,13 @@ class InstanceReference:
         is one (`wsp_eval.reference_cache`), else `compute()`."""
         if self.result_cache is None:
             return compute()
-        return load_or_compute_result(self.result_cache, self.config_dir.name, self.episode(self.row["roles"][0]),
+        return load_or_compute_result(self.result_cache, self.cache_entry, self.episode(self.row["roles"][0]),
                                       compute)
+
+    @property
+    def cache_entry(self) -> str:
+        """This config's entry folder in the reference caches."""
+        return entry_folder(self.config_dir.name, self.fingerprint)
 
     def num_frames(self, role: str) -> int:
         return int(self.row["num_frames"][self.row["roles"].index(role)])
@@ -113,7 +119,7 @@ class InstanceReference:
 
         if self.flow_cache is None:
             return compute()
-        return load_or_compute(self.flow_cache, self.config_dir.name, self.episode(role), duration, compute)
+        return load_or_compute(self.flow_cache, self.cache_entry, self.episode(role), duration, compute)
 
     @property
     def platform(self) -> str:
