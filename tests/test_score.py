@@ -189,11 +189,13 @@ def test_reference_caches_are_reused_exactly(suites_scores, suites_release, tmp_
     scoring reads the entries without rewriting them, a damaged entry is recomputed, and the scores (and T5's
     verdicts on the references) equal, bit for bit, a scoring that recomputes the whole reference side."""
     sub, report = suites_scores["static"]
-    folder = Path(report["reference_flow_cache"])  # this scoring's own cache folder (release × flow backend)
-    flows = sorted(folder.glob("t[23]_maniskill/*.npz"))
-    assert {p.parent.name for p in flows} == {"t2_maniskill", "t3_maniskill"}  # written by the fixture's scoring
+    folder = Path(report["reference_flow_cache"])  # this scoring's own cache folder (flow backend)
+    prints = {c: v["fingerprint"][:16] for c, v in report["release"]["configs"].items()}
+    flows = sorted(folder.glob("t[23]_maniskill@*/*.npz"))
+    # written by the fixture's scoring, each config's entries under its verified content's fingerprint
+    assert {p.parent.name for p in flows} == {f"{c}@{prints[c]}" for c in ("t2_maniskill", "t3_maniskill")}
     results = sorted(p for c in ("t4_maniskill", "t5_maniskill")
-                     for p in Path(report["reference_result_cache"][c], c).glob("*.json"))
+                     for p in Path(report["reference_result_cache"][c], f"{c}@{prints[c]}").glob("*.json"))
     assert len(results) == report["platforms"]["maniskill"]["suites"]["t4"]["n"] + \
         report["platforms"]["maniskill"]["suites"]["t5"]["n"]  # one entry per T4 and T5 instance
     entries = flows + results
