@@ -37,7 +37,7 @@ def build(platform: str, seed: int, out: Path, count: int, workers: int) -> Path
             return out
     except ReleaseError:
         pass
-    cmd = [sys.executable, "-m", "wsp_data.cli", "build", "--platform", platform, "--suite", "t5", "--count",
+    cmd = [sys.executable, "-m", "wsp_eval.cli", "build", "--platform", platform, "--suite", "t5", "--count",
            str(count), "--seed-range", "private", "--seed", str(seed), "--workers", str(workers), "--quiet",
            "--out", str(out)]
     done = subprocess.run(cmd, capture_output=True, text=True)

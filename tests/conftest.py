@@ -33,7 +33,7 @@ def build_tiny(tmp_path_factory, suite: str, count: int, tasks: tuple[str, ...],
 
 def tiny_build_command(out: Path, *extra: str) -> list[str]:
     """`wsp build` of the shared `t1` release's config into `out`, as a command line (tests of building itself)."""
-    return [sys.executable, "-m", "wsp_data.cli", "build", "--suite", TINY["suite"], "--platform", TINY["platform"],
+    return [sys.executable, "-m", "wsp_eval.cli", "build", "--suite", TINY["suite"], "--platform", TINY["platform"],
             "--count", str(TINY["count"]), "--tasks", *TINY["tasks"], "--out", str(out), "--quiet", *extra]
 
 

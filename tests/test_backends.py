@@ -54,7 +54,7 @@ def test_cli_reports_a_missing_checkpoint_or_endpoint_without_a_traceback(suites
 
     sub = tmp_path / "sub"
     write_baseline("static", suites_release, sub, seeds=(0,))
-    base = [sys.executable, "-m", "wsp_data.cli", "score", str(sub), "--release", str(suites_release), "--quiet"]
+    base = [sys.executable, "-m", "wsp_eval.cli", "score", str(sub), "--release", str(suites_release), "--quiet"]
     for extra, message in ((["--flow", "dpflow", "--flow-checkpoint", "/nonexistent/dpflow.ckpt"], "not found"),
                            (["--judge", "openai", "--judge-url", "http://127.0.0.1:9/v1", "--judge-model", "m"],
                             "127.0.0.1:9")):

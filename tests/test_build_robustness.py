@@ -14,7 +14,7 @@ import pytest
 from conftest import TINY, release_files as _files, tiny_build_command as _build_args
 from wsp_data.schema import RELEASE_JSON, STAGING_DIR
 
-WSP = [sys.executable, "-m", "wsp_data.cli"]
+WSP = [sys.executable, "-m", "wsp_eval.cli"]
 
 
 def test_sharded_killed_and_resumed_build_is_byte_identical(tmp_path, t1_release):

@@ -12,7 +12,7 @@ import json
 
 import numpy as np
 
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.studies.corruption import MARGIN_PX, background_regions, corrupt
 
 

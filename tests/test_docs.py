@@ -268,13 +268,16 @@ def make_targets() -> set[str]:
     return targets
 
 
-def _parse(parser, argv: list[str]) -> str | None:
-    """None when the CLI's parser accepts `argv`, else argparse's message. A value argparse refuses is accepted when
-    it is a placeholder (<release>) or a shell expansion ($1): the reader or the shell fills it in."""
+def _parse(argv: list[str]) -> str | None:
+    """None when the CLI's parser for `argv` (`wsp_eval.cli.parser(argv)`: the scoring commands and the plug-in
+    command `argv` names) accepts it, else argparse's message. A value argparse refuses is accepted when it is a
+    placeholder (<release>) or a shell expansion ($1): the reader or the shell fills it in."""
+    from wsp_eval.cli import parser
+
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            parser.parse_args(argv)
+            parser(argv).parse_args(argv)
     except SystemExit as e:
         if e.code not in (0, None):
             message = err.getvalue().strip().splitlines()[-1] if err.getvalue().strip() else f"exit {e.code}"
@@ -286,12 +289,10 @@ def _parse(parser, argv: list[str]) -> str | None:
 
 def test_every_documented_command_parses():
     """Every `wsp …` line of a ```bash / ```sh / ```console block in the README and the docs parses with
-    `wsp_data.cli.parser()` (the parser `wsp` runs), every `make X` names a Makefile target, and every script a
+    the parser `wsp` runs (`wsp_eval.cli.parser`), every `make X` names a Makefile target, and every script a
     documented `python …` / `bash …` line runs is in the repository. Placeholders such as <release> stand for
     paths."""
-    from wsp_data.cli import parser as cli_parser
-
-    parser, targets = cli_parser(), make_targets()
+    targets = make_targets()
     failures, checked = [], 0
     for path in reading_path():
         for lineno, line in shell_blocks(path):
@@ -304,7 +305,7 @@ def test_every_documented_command_parses():
                 name = Path(argv[0]).name
                 if name == "wsp":
                     checked += 1
-                    if (why := _parse(parser, argv[1:])) is not None:
+                    if (why := _parse(argv[1:])) is not None:
                         failures.append(f"{path}:{lineno}: `{' '.join(argv)}`: {why}")
                 elif name == "make":
                     checked += 1
@@ -327,10 +328,7 @@ def test_command_checker_reads_shell_lines_as_a_shell_does():
         ["wsp", "score", "s", "--release", "r", "--out", "o"], ["tee", "log"], ["make", "test"]]
     assert simple_commands("wsp validate <submission> --release <release> > problems.txt") == [
         ["wsp", "validate", "<submission>", "--release", "<release>"]]
-    from wsp_data.cli import parser as cli_parser
-
-    p = cli_parser()
-    assert _parse(p, ["score", "<submission>", "--release", "<release>", "--out", "report"]) is None
-    assert "invalid choice" in _parse(p, ["build", "--suite", "t9"])
-    assert _parse(p, ["build", "--suite", "$1", "--count", "$2"]) is None  # a shell function's arguments
-    assert _parse(p, ["score", "sub", "--release", "r", "--out", "o", "--no-such-flag"]) is not None
+    assert _parse(["score", "<submission>", "--release", "<release>", "--out", "report"]) is None
+    assert "invalid choice" in _parse(["build", "--suite", "t9"])  # a plug-in command's own arguments are checked
+    assert _parse(["build", "--suite", "$1", "--count", "$2"]) is None  # a shell function's arguments
+    assert _parse(["score", "sub", "--release", "r", "--out", "o", "--no-such-flag"]) is not None

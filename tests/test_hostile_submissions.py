@@ -87,7 +87,7 @@ def moving(n: int, height: int, width: int) -> np.ndarray:
 
 
 def cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "wsp_data.cli", *args], capture_output=True, timeout=300)
+    return subprocess.run([sys.executable, "-m", "wsp_eval.cli", *args], capture_output=True, timeout=300)
 
 
 def test_oversize_resolution_is_refused_from_the_header(sub, t1_release, rows):

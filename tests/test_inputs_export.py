@@ -10,7 +10,7 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from test_generate import CONFIG, shift_model
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.baselines import write_baseline
 from wsp_eval.generate import generate
 from wsp_eval.reference import reference_frames, reference_size

@@ -77,7 +77,7 @@ def test_a_byte_changed_in_any_file_scoring_reads_stops_score_and_validate_with_
     assert str(release / target) in message and "release.json lists" in message
     assert f"re-download config {CONFIG}" in message and "wsp build --platform maniskill --suite t1" in message
     assert not (out / "report.json").exists() and not (out / "cache").exists()  # nothing scored, nothing written
-    run = subprocess.run([sys.executable, "-m", "wsp_data.cli", "validate", str(pristine[1]), "--release",
+    run = subprocess.run([sys.executable, "-m", "wsp_eval.cli", "validate", str(pristine[1]), "--release",
                           str(release)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 1 and str(release / target) in run.stdout and "Traceback" not in run.stderr
 
@@ -116,7 +116,7 @@ def test_verify_names_missing_and_unlisted_files(release):
     gone = release / _files(release)[-1]
     gone.unlink()
     (release / CONFIG / "meta" / "extra.json").write_text("{}")
-    run = subprocess.run([sys.executable, "-m", "wsp_data.cli", "verify", str(release), "--quiet"],
+    run = subprocess.run([sys.executable, "-m", "wsp_eval.cli", "verify", str(release), "--quiet"],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 1, run.stderr
     assert f"{gone}: missing" in run.stdout and "meta/extra.json: not listed in release.json" in run.stdout
@@ -170,7 +170,7 @@ def test_a_second_scoring_into_one_folder_refuses_and_a_killed_holders_lock_is_t
 def test_two_concurrent_scorings_one_refuses(pristine, tmp_path):
     release, sub, _ = pristine
     out = tmp_path / "report"
-    cmd = [sys.executable, "-m", "wsp_data.cli", "score", str(sub), "--release", str(release), "--out", str(out),
+    cmd = [sys.executable, "-m", "wsp_eval.cli", "score", str(sub), "--release", str(release), "--out", str(out),
            "--quiet"]
     first = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

@@ -12,7 +12,7 @@ import json
 
 import pytest
 
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.baselines import write_baseline
 
 

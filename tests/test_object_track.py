@@ -140,7 +140,7 @@ def test_an_older_release_format_is_refused_with_the_command_that_rebuilds_it(su
 
 def test_the_negatives_study_runs_and_writes_its_files(suites_release, tmp_path):
     out = tmp_path / "study"
-    run = subprocess.run([sys.executable, "-m", "wsp_data.cli", "study", "t5-negatives", "--release",
+    run = subprocess.run([sys.executable, "-m", "wsp_eval.cli", "study", "t5-negatives", "--release",
                           str(suites_release), "--out", str(out), "--limit", "2", "--quiet"],
                          capture_output=True, text=True, timeout=900)
     assert run.returncode == 0, run.stderr

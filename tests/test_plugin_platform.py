@@ -257,7 +257,7 @@ def test_a_plugin_platform_builds_a_real_t1_config(planar, tmp_path):
 
     import pyarrow.parquet as pq
 
-    from wsp_data.cli import main
+    from wsp_eval.cli import main
 
     out = tmp_path / "worldsimprobe"  # the CLI, no --count: the kit's default count
     assert main(["build", "--platform", "planar", "--suite", "t1", "--out", str(out), "--quiet"]) == 0

@@ -17,7 +17,7 @@ import urllib.request
 import pytest
 
 from test_teleop import _browser, _wait
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.baselines import write_baseline
 from wsp_eval.studies.rating import RatingServer, RatingSession, collect_items
 

@@ -8,7 +8,7 @@ import json
 
 import pytest
 
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.baselines import BASELINES
 from wsp_eval.generate import per_episode, write_submission
 

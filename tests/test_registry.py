@@ -106,9 +106,9 @@ def test_a_third_party_platform_is_a_kit(tmp_path):
         KIT = Toy()
     """)
     script = ("from wsp_data.platforms import KITS, kit; from wsp_data.builders import BuildConfig; "
-              "from wsp_data.cli import parser; "
+              "from wsp_eval.cli import parser; "
               "BuildConfig('t1', 'toy', 1, ('PickCube',)); "
-              "assert parser().parse_args(['build', '--suite', 't1', '--platform', 'toy']).platform == 'toy'; "
+              "argv = ['build', '--suite', 't1', '--platform', 'toy']; assert parser(argv).parse_args(argv).platform == 'toy'; "
               "print(list(KITS), kit('toy').name)")
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(tmp_path), os.environ.get("PYTHONPATH")]))}
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=120)

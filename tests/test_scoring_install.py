@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from wsp_data.cli import main
+from wsp_eval.cli import main
 from wsp_eval.baselines import write_baseline
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -71,13 +71,13 @@ def test_every_planted_defect_is_reported_by_file(oracle, t1_release, tmp_path):
         assert expected in text, f"not reported: {expected}\n{text}"
     assert len(text.splitlines()) == 9  # the 8 defects + the linked video counted missing
 
-    r = subprocess.run([sys.executable, "-m", "wsp_data.cli", "validate", str(sub), "--release", str(t1_release)],
+    r = subprocess.run([sys.executable, "-m", "wsp_eval.cli", "validate", str(sub), "--release", str(t1_release)],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 1 and "Traceback" not in r.stderr and "9 problem(s)" in r.stdout
 
     # `wsp score` never crashes on it: a link stops it with a clear message; missing files stop it unless
     # --allow-missing, which scores every defective rollout 0 and lists it in the report
-    score = [sys.executable, "-m", "wsp_data.cli", "score", str(sub), "--release", str(t1_release), "--quiet"]
+    score = [sys.executable, "-m", "wsp_eval.cli", "score", str(sub), "--release", str(t1_release), "--quiet"]
     r = subprocess.run(score + ["--out", str(tmp_path / "r1")], capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "Traceback" not in r.stderr and "is a link" in r.stderr
     ep(6).unlink()
@@ -107,7 +107,7 @@ def test_a_partially_downloaded_release_is_named_not_a_traceback(oracle, t1_rele
     missing = partial / "t1_maniskill" / "instances.parquet"
     assert [p.path for p in validate(oracle, partial)] == [str(missing)]
     for verb in (["validate"], ["score", "--out", str(tmp_path / "report"), "--quiet"]):
-        r = subprocess.run([sys.executable, "-m", "wsp_data.cli", *verb[:1], str(oracle), "--release", str(partial),
+        r = subprocess.run([sys.executable, "-m", "wsp_eval.cli", *verb[:1], str(oracle), "--release", str(partial),
                             *verb[1:]], capture_output=True, text=True, timeout=300)
         assert r.returncode != 0 and "Traceback" not in r.stderr, r.stderr
         assert str(missing) in r.stdout + r.stderr and "partial download" in r.stdout + r.stderr

@@ -1,7 +1,8 @@
 """Release-level files: `release.json` (semver, code version, build configs, per-file sha256, counts),
 the dataset card `README.md` rendered from `cards/`, and `croissant.json`.
 
-A folder is a WorldSimProbe release when it holds `release.json`; `describe` reads one back for `wsp info`.
+A folder is a WorldSimProbe release when it holds `release.json` (`wsp info` summarises one:
+`wsp_eval.release_info`).
 """
 
 from __future__ import annotations
@@ -9,7 +10,6 @@ from __future__ import annotations
 import hashlib
 from collections import Counter
 import json
-import re
 import subprocess
 from pathlib import Path
 
@@ -140,29 +140,3 @@ def _write_croissant(root: Path, release: dict, card_configs: list[dict]) -> Non
         "rai:dataSocialImpact": "Diagnostic benchmark; no foreseeable direct harm.",
     }
     (root / CROISSANT).write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n")
-
-
-def describe(root: Path) -> str:
-    """A human-readable summary of a release for `wsp info`."""
-    root = Path(root)
-    rel = load_release(root)
-    card = (root / CARD).read_text() if (root / CARD).exists() else ""
-    licence = next((line.split(":", 1)[1].strip() for line in card.splitlines() if line.startswith("license:")), "?")
-    lines = [f"{root}: WorldSimProbe {rel['version']} built by {rel['code_version']}; licence {licence} (dataset card)",
-             f"{'config':<16} {'split':>5} {'instances':>9} {'episodes':>9} {'tasks':>6}  build"]
-    for name, c in sorted(rel["configs"].items()):
-        n = c.get("counts", {})
-        b = c["build_config"]
-        info = root / name / "meta" / "info.json"
-        split = ",".join(json.loads(info.read_text()).get("splits", {})) if info.exists() else "?"
-        lines.append(f"{name:<16} {split:>5} {n.get('instances', '?'):>9} {n.get('episodes', '?'):>9} "
-                     f"{n.get('tasks', '?'):>6}  count={b['count']} seed={b['seed']} tasks={','.join(b['tasks'])}")
-    in_card = set(re.findall(r"config_name: (\S+)", card))
-    if card and in_card != set(rel["configs"]):
-        lines.append(f"the dataset card lists configs {sorted(in_card)}, the release holds {sorted(rel['configs'])}: "
-                     "rebuild the card (any `wsp build` re-writes it)")
-    staged = root / STAGING_DIR
-    if staged.exists() and any(staged.iterdir()):
-        lines.append(f"unfinished builds staged under {staged}: re-run the same `wsp build` to resume")
-    lines.append(f"{len(rel.get('files', {}))} files with sha256 in {RELEASE_JSON}")
-    return "\n".join(lines)

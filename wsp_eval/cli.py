@@ -1,5 +1,10 @@
 """`wsp`: the WorldSimProbe command line.
 
+The scoring commands are defined here. Other commands come from the `worldsimprobe.commands` entry-point group
+as `Command`s (this distribution adds the build side's `build`, `sources` and `teleop` from
+`wsp_data.commands`), and a plug-in command is loaded only when it is asked for: `wsp score` never runs
+build-side code, and in the scoring-only install a build-side command stops with one line naming the extra.
+
     wsp build --platform maniskill --suite t1 --count N --out DIR   build (or resume) a config of a release
     wsp info DIR                                                     what a release holds
     wsp sources [--seeds N]                                          scripted expert success per task
@@ -24,15 +29,30 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
-from wsp_data.platforms import KITS
-from wsp_data.schema import DEFAULT_RELEASE_NAME, PRIVATE_RANGE, SEED_BASE, SUITES
 from wsp_eval import console
-from wsp_eval.registry import PluginError
+from wsp_eval.registry import PluginError, Registry
+from wsp_eval.release_format import DEFAULT_RELEASE_NAME, ReleaseError, load_release
+
 
 class CliError(Exception):
-    pass
+    """A command that cannot go on; `main` prints the message on one line and exits 2."""
+
+
+@dataclass(frozen=True)
+class Command:
+    """A `wsp` sub-command from another module: its one-line help, what adds its arguments to its parser, and
+    what runs it (returning the exit code; CliError for an error the user can fix)."""
+
+    help: str
+    add_arguments: Callable[[argparse.ArgumentParser], None]
+    run: Callable[[argparse.Namespace], int]
+
+
+COMMANDS: Registry[Command] = Registry("command", "worldsimprobe.commands")
 
 
 # Modules that only an extra installs (`build`: simulators, LeRobot, `datasets`; `cluster`: Ray); the scoring-only
@@ -42,17 +62,8 @@ BUILD_MODULES = frozenset({"sapien", "mani_skill", "mujoco", "robosuite", "liber
 EXTRA_OF_MODULE = {**dict.fromkeys(BUILD_MODULES, "build"), "ray": "cluster"}
 
 
-def _shard(text: str) -> tuple[int, int]:
-    try:
-        i, n = (int(x) for x in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected i/n (e.g. 0/4), got {text!r}") from None
-    if not (n >= 1 and 0 <= i < n):
-        raise argparse.ArgumentTypeError(f"expected 0 <= i < n, got {text!r}")
-    return i, n
-
-
-def _positive(text: str) -> int:
+def positive(text: str) -> int:
+    """An argparse type: a whole number above 0."""
     try:
         v = int(text)
     except ValueError:
@@ -62,42 +73,26 @@ def _positive(text: str) -> int:
     return v
 
 
-def parser() -> argparse.ArgumentParser:
+def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """`wsp`'s parser for the command line `argv`: the scoring commands, and the plug-in command `argv` names
+    (the others are listed by name, loaded when used)."""
     p = argparse.ArgumentParser(prog="wsp", description="WorldSimProbe: build and inspect benchmark releases.")
     sub = p.add_subparsers(dest="command", required=True)
-    b = sub.add_parser("build", help="build (or resume) one suite×platform config of a release")
-    b.add_argument("--platform", choices=KITS, default="maniskill")
-    b.add_argument("--suite", choices=SUITES, required=True)
-    b.add_argument("--count", type=_positive,
-                   help="instances to build (default: the paper's count; train: 100 episodes per task)")
-    b.add_argument("--out", type=Path, default=Path(DEFAULT_RELEASE_NAME), help="release folder (default: ./worldsimprobe)")
-    b.add_argument("--tasks", nargs="+", help="restrict to these tasks (default: all solved benchmark tasks)")
-    b.add_argument("--primitives", nargs="+", default=[], metavar="PRIMITIVE",
-                   help="T5 only: restrict the slots to these scripted primitives (default: all the platform's, "
-                        "balanced); for judge data rich in one primitive")
-    b.add_argument("--seed", type=int, default=0,
-                   help="build seed (default 0): seeds the proposals' random choices (T1's perturbation, T2's donor, "
-                        "T4's intervention); it chooses the scenes only with --seed-range private")
-    b.add_argument("--seed-range", choices=[*sorted(SEED_BASE), PRIVATE_RANGE], default="",
-                   help="draw scene seeds from this suite's range instead of the config's own (e.g. `train` for "
-                        "judge-training data that never shares a scene with a test suite), or from the private "
-                        "range: scenes keyed by --seed that no public release holds (private test sets, fresh checks)")
-    b.add_argument("--max-attempts", type=_positive, default=8, help="proposals per instance slot before giving up")
-    b.add_argument("--shard", type=_shard, default=(0, 1), help="build only slots k with k %% n == i (i/n)")
-    b.add_argument("--workers", type=_positive, default=1, help="worker processes (each holds its own simulators)")
-    b.add_argument("--executor", choices=("local", "ray"), default="local",
-                   help="local (this machine's processes, default) or ray (slots as Ray tasks on a cluster)")
-    b.add_argument("--address", help="with --executor ray: the cluster to join (`auto`, or host:port); default: "
-                                     "a local Ray instance with --workers CPUs")
-    b.add_argument("--restart", action="store_true", help="discard a staged unfinished build of this config")
-    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    asked = next((a for a in argv or [] if not a.startswith("-")), None)
+    for name in COMMANDS:
+        if name == asked:
+            command = COMMANDS[name]
+            c = sub.add_parser(name, help=command.help)
+            command.add_arguments(c)
+            c.set_defaults(run=command.run)
+            continue
+        try:  # no command named (`wsp --help`): every command's own help line
+            text = COMMANDS[name].help if asked is None else f"see `wsp {name} --help`"
+        except PluginError:
+            text = f"see `wsp {name} --help`"
+        sub.add_parser(name, help=text)
     i = sub.add_parser("info", help="summarise a release folder")
     i.add_argument("release", type=Path)
-    s = sub.add_parser("sources", help="scripted expert success rate per task")
-    s.add_argument("--platform", choices=KITS, default="maniskill")
-    s.add_argument("--seeds", type=_positive, default=20)
-    s.add_argument("--tasks", nargs="+")
-    s.add_argument("--out", type=Path, help="also write the Markdown table here")
     v = sub.add_parser("validate", help="check a submission against a release without scoring it")
     v.add_argument("submission", type=Path)
     v.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
@@ -133,21 +128,13 @@ def parser() -> argparse.ArgumentParser:
     ca.add_argument("--baselines", nargs="+", help="default: all registered baselines")
     ca.add_argument("--seeds", type=int, nargs="+", default=[0])
     _score_options(ca)
-    t = sub.add_parser("teleop", help="serve the browser teleoperation page; record operator source trajectories")
-    t.add_argument("--task", default="PickCube", help="ManiSkill task (default PickCube)")
-    t.add_argument("--seed", type=int, default=0, help="scene seed of the episode (default 0)")
-    t.add_argument("--operator", required=True, help="operator name recorded in the provenance")
-    t.add_argument("--out", type=Path, default=Path("teleop"), help="folder for saved trajectories (default ./teleop)")
-    t.add_argument("--port", type=int, default=8765, help="port on 127.0.0.1 (default 8765; 0 = any free port)")
-    t.add_argument("--step", type=float, default=0.01, help="TCP translation per command, m (default 0.01)")
-    t.add_argument("--yaw-step", type=float, default=0.1, help="TCP yaw per command, rad (default 0.1)")
     st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md)")
     study = st.add_subparsers(dest="study", required=True)
     co = study.add_parser("corruption", help="RMFA drop under blur and texture removal, robot region vs background")
     co.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     co.add_argument("--out", type=Path, required=True, help="folder for corruption.{json,md}, example.png (resumable)")
     co.add_argument("--config", help="T2 config (default: the release's first, e.g. t2_libero)")
-    co.add_argument("--count", type=_positive, default=50, help="references (default 50, as the paper)")
+    co.add_argument("--count", type=positive, default=50, help="references (default 50, as the paper)")
     co.add_argument("--seed", type=int, default=0, help="seed of the background regions and the bootstrap")
     co.add_argument("--quiet", action="store_true", help="no progress bar")
     for name, text, files in (
@@ -160,7 +147,7 @@ def parser() -> argparse.ArgumentParser:
         neg.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
         neg.add_argument("--out", type=Path, required=True, help=f"folder for {files}")
         neg.add_argument("--configs", nargs="+", help="configs of the suite (default: every one of the release)")
-        neg.add_argument("--limit", type=_positive, help="instances per config (default: all)")
+        neg.add_argument("--limit", type=positive, help="instances per config (default: all)")
         neg.add_argument("--quiet", action="store_true", help="no progress bar")
     ag = study.add_parser("agreement", help="Spearman ρ and binary agreement of scores with `wsp rate` ratings")
     ag.add_argument("--ratings", type=Path, required=True, help="the folder `wsp rate --out` wrote")
@@ -181,7 +168,7 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--out", type=Path, default=Path("ratings"), help="ratings folder (default ./ratings)")
     r.add_argument("--suites", nargs="+", default=["t2", "t3"], help="suites to rate (default t2 t3)")
     r.add_argument("--seeds", type=int, nargs="+", default=[0], help="generation seeds to rate (default 0)")
-    r.add_argument("--per-config", type=_positive, help="rate only the first N instances of each config")
+    r.add_argument("--per-config", type=positive, help="rate only the first N instances of each config")
     r.add_argument("--order-seed", type=int, default=0, help="seed of the presentation order (default 0)")
     r.add_argument("--port", type=int, default=8766, help="port on 127.0.0.1 (default 8766; 0 = any free port)")
     return p
@@ -190,7 +177,7 @@ def parser() -> argparse.ArgumentParser:
 def _score_options(p: argparse.ArgumentParser) -> None:
     from wsp_eval.backends import FLOW, JUDGE, TRACKER
 
-    p.add_argument("--workers", type=_positive, default=1, help="scoring processes (default 1)")
+    p.add_argument("--workers", type=positive, default=1, help="scoring processes (default 1)")
     p.add_argument("--executor", choices=("local", "ray"), default="local",
                    help="local processes (default) or ray (instances as Ray tasks; every node reads the release "
                         "and submission at the same paths)")
@@ -215,58 +202,8 @@ def _score_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
-def cmd_build(args) -> int:
-    from wsp_data.build import BuildError, build, format_report
-    from wsp_data.builders import BuildConfig, builder_class
-    from wsp_data.builders.train import EPISODES_PER_TASK
-    from wsp_data.platforms import kit
-
-    try:
-        builder_class(args.suite)
-        known = kit(args.platform).tasks()
-    except KeyError as e:
-        raise CliError(e.args[0]) from None
-    except ModuleNotFoundError:
-        raise
-    except ImportError as e:
-        raise CliError(f"the {args.platform} platform is not installed ({e}); run `make setup`") from None
-    tasks = tuple(args.tasks or known)
-    unknown = [t for t in tasks if t not in known]
-    if unknown:
-        listed = "\n  ".join(known)
-        raise CliError(f"unknown task(s) {', '.join(unknown)}; the {len(known)} known {args.platform} tasks:\n  {listed}")
-    if args.seed and args.seed_range != PRIVATE_RANGE:
-        print(f"note: --seed {args.seed} changes the proposals' random choices, not the scenes: slot k, attempt a "
-              f"still draws scene seed {SEED_BASE[args.seed_range or args.suite]:,} + 100·k + a; for scenes of this "
-              f"seed's own, add --seed-range private", file=sys.stderr)
-    try:
-        count = args.count or kit(args.platform).default_counts.get(args.suite) or EPISODES_PER_TASK * len(tasks)
-        config = BuildConfig(args.suite, args.platform, count, tasks, args.seed, args.max_attempts, args.seed_range,
-                             tuple(args.primitives))
-        result = build(config, args.out, shard=args.shard, workers=args.workers, restart=args.restart,
-                       progress=not args.quiet, executor=args.executor, address=args.address)
-    except (BuildError, ValueError) as e:
-        raise CliError(str(e)) from None
-    if result.up_to_date:
-        print(f"{config.name} in {result.release} is up to date (same build config); nothing to do")
-        return 0
-    per = result.seconds / max(1, result.rendered_steps) * 1000
-    print(f"decided {result.decided_now} slot(s) in {result.seconds:.1f} s; {result.rendered_steps} rendered steps "
-          f"({per:.0f} ms per rendered step, all costs included)")
-    if result.assembled:
-        print(format_report(result.report))
-        from wsp_data.schema import BUILD_REPORT
-
-        print(f"report: {result.release / config.name / BUILD_REPORT}; library output: {result.log}; "
-              f"the release: wsp info {result.release}")
-    else:
-        print(f"{result.remaining} slot(s) of {config.name} are not decided yet (other shards); run the remaining "
-              f"shards, then any `wsp build` with the same arguments assembles the config")
-    return 0
-
-
 def cmd_info(args) -> int:
-    from wsp_data.release import ReleaseError, describe
+    from wsp_eval.release_info import describe
 
     try:
         print(describe(args.release))
@@ -275,17 +212,8 @@ def cmd_info(args) -> int:
     return 0
 
 
-def cmd_sources(args) -> int:
-    from wsp_data.sources import survey
-
-    argv = ["--platform", args.platform, "--seeds", str(args.seeds)] + (["--tasks", *args.tasks] if args.tasks else [])
-    argv += ["--out", str(args.out)] if args.out else []
-    return survey.main(argv) or 0
-
-
 def _release_or_error(path: Path) -> Path:
-    from wsp_data.release import ReleaseError, load_release
-
+    """`path` when it holds a readable release, else CliError saying why."""
     try:
         load_release(path)
     except ReleaseError as e:
@@ -501,31 +429,26 @@ def cmd_rate(args) -> int:
     return 0
 
 
-def cmd_teleop(args) -> int:
-    from wsp_data.platforms.maniskill import teleop
-
-    return teleop.run(args)
-
-
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     try:
-        args = parser().parse_args(argv)
-        commands = {"build": cmd_build, "info": cmd_info, "sources": cmd_sources, "validate": cmd_validate,
-                    "verify": cmd_verify, "baseline": cmd_baseline, "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate,
-                    "teleop": cmd_teleop, "study": cmd_study, "rate": cmd_rate,
-                    "leaderboard": cmd_leaderboard, "export-inputs": cmd_export_inputs}
-        return commands[args.command](args)
-    except (CliError, PluginError) as e:
+        args = parser(argv).parse_args(argv)
+        commands = {"info": cmd_info, "validate": cmd_validate, "verify": cmd_verify, "baseline": cmd_baseline,
+                    "generate": cmd_generate, "score": cmd_score, "calibrate": cmd_calibrate, "study": cmd_study,
+                    "rate": cmd_rate, "leaderboard": cmd_leaderboard, "export-inputs": cmd_export_inputs}
+        return args.run(args) if "run" in args else commands[args.command](args)
+    except PluginError as e:
+        missing = e.__cause__ if isinstance(e.__cause__, ModuleNotFoundError) else None
+        if missing is None or _extra_needed(argv, missing) is None:
+            print(f"wsp: error: {e}", file=sys.stderr)
+        return 2
+    except CliError as e:
         print(f"wsp: error: {e}", file=sys.stderr)
         _print_failure_hint()
         return 2
     except ModuleNotFoundError as e:
-        extra = EXTRA_OF_MODULE.get((e.name or "").split(".")[0])
-        if extra is None:
+        if _extra_needed(argv, e) is None:
             raise
-        print(f"wsp: error: `wsp {args.command}` needs the {extra} extra (missing module {e.name!r}): "
-              f"pip install 'worldsimprobe[{extra}]' — or `make setup`, which also installs LIBERO's stack",
-              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("wsp: interrupted; finished work is kept (staged instances, written videos, cached scores): re-run "
@@ -534,6 +457,17 @@ def main(argv: list[str] | None = None) -> int:
     except Exception:
         _print_failure_hint()
         raise
+
+
+def _extra_needed(argv: list[str], e: ModuleNotFoundError) -> str | None:
+    """The extra that installs the module `e` misses, after saying so in one line; None for another module."""
+    extra = EXTRA_OF_MODULE.get((e.name or "").split(".")[0])
+    if extra is not None:
+        command = next((a for a in argv if not a.startswith("-")), "")
+        print(f"wsp: error: `wsp {command}` needs the {extra} extra (missing module {e.name!r}): "
+              f"pip install 'worldsimprobe[{extra}]' — or `make setup`, which also installs LIBERO's stack",
+              file=sys.stderr)
+    return extra
 
 
 def _print_failure_hint() -> None:
