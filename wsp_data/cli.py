@@ -335,6 +335,7 @@ def cmd_baseline(args) -> int:
 
 
 def cmd_generate(args) -> int:
+    import wsp_models  # noqa: F401  (registers this distribution's models, `--model reference`, entry points or not)
     from wsp_eval.generate import GenerateError, generate, load_model
 
     try:
