@@ -28,7 +28,7 @@ import pyarrow.parquet as pq
 from wsp_eval.backends import BackendSpec
 from wsp_eval.reference import reference_size
 from wsp_eval.release_format import split_config
-from wsp_eval.score import Job, _backends, _flow_cache, _result_cache, score_instance
+from wsp_eval.score import Job, backends_for, flow_cache_folder, result_cache_folder, score_instance
 from wsp_eval.submission import VIDEO_NAME, test_configs
 from wsp_eval.suites import SCORERS
 from wsp_eval.video import read_video
@@ -43,9 +43,9 @@ MODES = ("none", "filling", "warm")
 def measure(release: Path, submission: Path, config: str, limit: int) -> dict:
     seeds = tuple(json.loads((submission / "submission.json").read_text())["seeds"])
     spec = BackendSpec()
-    backends = _backends(spec, SCORERS[split_config(config)[0]].NEEDS)
-    flows = _flow_cache(release, spec, backends)
-    results = _result_cache(release, config, spec, backends)
+    backends = backends_for(spec, SCORERS[split_config(config)[0]].NEEDS)
+    flows = flow_cache_folder(release, spec, backends)
+    results = result_cache_folder(release, config, spec, backends)
     rows = pq.read_table(release / config / "instances.parquet").to_pylist()[:limit]
     size = reference_size(release / config)
     times = {m: [] for m in MODES}

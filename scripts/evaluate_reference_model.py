@@ -23,9 +23,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from wsp_eval.baselines import write_baseline  # noqa: E402
-from wsp_eval.generate import episode_contexts, generate, load_model  # noqa: E402
+from wsp_eval.generate import episode_contexts, generate  # noqa: E402
 from wsp_eval.score import score_submission  # noqa: E402
 from wsp_eval.video import read_video  # noqa: E402
+from wsp_models.reference import reference_model  # noqa: E402
 
 BASELINES = ("oracle", "static", "action_blind")
 MODEL = "reference"
@@ -39,7 +40,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--workers", type=int, default=2, help="scoring workers")
     args = ap.parse_args()
-    generate(load_model(MODEL), args.release, args.out / MODEL, seeds=args.seeds, name=MODEL)
+    generate(reference_model(), args.release, args.out / MODEL, seeds=args.seeds, name=MODEL)
     for name in BASELINES:
         write_baseline(name, args.release, args.out / name, tuple(args.seeds), progress=True)
     reports = {name: score_submission(args.out / name, args.release, args.out / "reports" / name,

@@ -15,9 +15,9 @@ from wsp_data.builders.t1 import MAGNITUDES, WINDOW
 from wsp_data.builders.t2 import object_flung
 from wsp_data.builders.t4 import KINDS, static
 from wsp_data.builders.t5_rules import check
-from wsp_data.builders.validity import check_rollout
 from wsp_data.platforms import kit
 from wsp_data.platforms.libero.kit import osc_blocked
+from wsp_data.platforms.validity import check_rollout
 from wsp_data.schema import CARD, CONTACTS_KEY, OBJECT_POSES_KEY, PLATFORM_INFO, SOURCE_ROLE
 from wsp_eval.reference import object_poses
 

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from wsp_data.builders.validity import check_rollout
+from wsp_data.platforms.validity import check_rollout
 
 LIMITS = np.array([[-2.9, 2.9]] * 7 + [[0.0, 0.04]] * 2)
 

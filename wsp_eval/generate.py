@@ -12,7 +12,8 @@ A model is either
   `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
   in order.
 `load_model("module:callable")` finds one, or `load_model(name)` one registered in `MODELS` (a zero-argument
-factory; built in: `reference`, the reference world model of `wsp_models`, which needs the `train` extra). A model
+factory, from the entry-point group `worldsimprobe.models`: this distribution declares `reference`, its reference
+world model, which needs the `train` extra). A model
 may carry a dict `wsp_info` (its version, checkpoints); it is written into submission.json as `model_info`.
 
 `write_submission` is the loop shared with the calibration baselines: each video is written to a temp name
@@ -91,14 +92,7 @@ class GenerateResult:
     seconds: float  # spent producing frames in this call
 
 
-def _reference_model() -> Model:
-    from wsp_models.reference.model import ReferenceModel
-
-    return ReferenceModel()
-
-
 MODELS: Registry[Callable[[], Model]] = Registry("model", "worldsimprobe.models")
-MODELS.register("reference", _reference_model)
 
 
 def load_model(spec: str) -> Model:

@@ -95,7 +95,8 @@ class Job:
 _BACKENDS: dict[tuple, Backends] = {}
 
 
-def _backends(spec: BackendSpec, needs: tuple[str, ...]) -> Backends:
+def backends_for(spec: BackendSpec, needs: tuple[str, ...]) -> Backends:
+    """The backends of `spec` for the roles `needs`, made once per process and shared by its instances."""
     key = (spec, needs)
     if key not in _BACKENDS:
         _BACKENDS[key] = backend_registry.make(spec, needs)
@@ -128,7 +129,7 @@ def score_instance(job: Job, spec: BackendSpec) -> dict:
     """Score one instance over every seed: a JSON-ready record."""
     suite, platform = split_config(job.config)
     module = SCORERS[suite]
-    backends = _backends(spec, module.NEEDS)
+    backends = backends_for(spec, module.NEEDS)
     ref = InstanceReference(Path(job.release) / job.config, job.row,
                             flow_cache=Path(job.flow_cache) if job.flow_cache else None,
                             result_cache=Path(job.result_cache) if job.result_cache else None,
@@ -172,7 +173,7 @@ def _worker(args: tuple[Job, BackendSpec]) -> dict:
 
 
 # -- the run ----------------------------------------------------------------------------------------------------
-def _flow_cache(release: Path, spec: BackendSpec, backends: Backends) -> str | None:
+def flow_cache_folder(release: Path, spec: BackendSpec, backends: Backends) -> str | None:
     """The release's reference-flow cache folder for this flow backend, or None (no flow backend, or nowhere to
     write)."""
     if backends.flow is None:
@@ -181,7 +182,7 @@ def _flow_cache(release: Path, spec: BackendSpec, backends: Backends) -> str | N
     return str(folder) if folder else None
 
 
-def _result_cache(release: Path, config: str, spec: BackendSpec, backends: Backends) -> str | None:
+def result_cache_folder(release: Path, config: str, spec: BackendSpec, backends: Backends) -> str | None:
     """The reference-result cache folder of a config's suite (`backends`: built for at least its roles), or None:
     for a suite without reference-side results, or when a backend it uses may answer differently over time
     (`cacheable` False: a remote VLM)."""
@@ -290,8 +291,8 @@ def _score_verified(submission: Path, release: Path, out: Path, rel_meta: dict, 
 
     done = _open_cache(out, _cache_key(submission, release, spec, backends, fingerprints, accept_lossy))
     rows = {c: _rows(release, c) for c in configs}
-    flows = _flow_cache(release, spec, backends) if reference_cache else None
-    results = {c: _result_cache(release, c, spec, backends) if reference_cache else None for c in configs}
+    flows = flow_cache_folder(release, spec, backends) if reference_cache else None
+    results = {c: result_cache_folder(release, c, spec, backends) if reference_cache else None for c in configs}
     sizes = {c: reference_size(release / c) for c in configs}
     todo = [Job(str(release), str(submission), c, r, tuple(meta["seeds"]), accept_lossy, flows, results[c], sizes[c],
                 fingerprints[c]) for c in configs for r in rows[c] if (c, r["instance_id"]) not in done]

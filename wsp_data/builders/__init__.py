@@ -3,13 +3,14 @@ part of the benchmark's definition (seed ranges, release format), so `BUILDERS` 
 
 from __future__ import annotations
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.t1 import T1Builder
 from wsp_data.builders.t2 import T2Builder
 from wsp_data.builders.t3 import T3Builder
 from wsp_data.builders.t4 import T4Builder
 from wsp_data.builders.t5 import T5Builder
 from wsp_data.builders.train import TrainBuilder
+from wsp_data.platforms.contract import Dropped
 from wsp_eval.registry import Registry
 
 BUILDERS: Registry[type[SuiteBuilder]] = Registry("suite builder")

@@ -1,5 +1,5 @@
-"""What every suite builder shares: the build config, the attempt outcome types, and the `SuiteBuilder`
-base class whose hooks a suite module fills in.
+"""What every suite builder shares: the build config, the accepted attempt (`Kept`; a rejected one is a
+`wsp_data.platforms.contract.Dropped`), and the `SuiteBuilder` base class whose hooks a suite module fills in.
 
 A build has `count` slots. Slot k is planned by `SuiteBuilder.plan(k)` (default: task `tasks[k % len(tasks)]`,
 no group; suites balanced by kind or primitive override it) and tries attempts
@@ -12,12 +12,13 @@ from __future__ import annotations
 
 import json
 from abc import ABC, abstractmethod
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import ClassVar
 
 import numpy as np
 
 from wsp_data.platforms import KITS, kit
+from wsp_data.platforms.contract import Dropped
 from wsp_data.schema import MAX_ATTEMPTS, PRIVATE_RANGE, SEED_BASE, SUITES, scene_seed, slot_attempt
 from wsp_data.staging import RolloutArrays
 
@@ -117,16 +118,6 @@ class Kept:
     rollouts: list[RolloutArrays]
     rendered_steps: int = 0
     simulated_steps: int = 0
-
-
-@dataclass
-class Dropped:
-    """A rejected proposal and why (a key of the build report)."""
-
-    reason: str
-    rendered_steps: int = 0
-    simulated_steps: int = 0
-    detail: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

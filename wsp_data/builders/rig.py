@@ -1,4 +1,5 @@
-"""The simulator resources one task needs in one build worker."""
+"""The simulator resources a build worker keeps: rigs (`wsp_data.platforms.contract.TaskRig` or a suite's own),
+one per task (or task and scene)."""
 
 from __future__ import annotations
 
@@ -6,36 +7,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-import numpy as np
-
-from wsp_data.builders.validity import check_rollout
-from wsp_data.platforms import PlatformKit, kit
-
-
-def rollout_problem(k: PlatformKit, qlimits: np.ndarray, ro) -> str | None:
-    """The common validity checks (spec §5) of a platform rollout, read the way its platform needs."""
-    return check_rollout(ro.stack("qpos"), ro.stack("tcp_pose"), ro.stack("object_poses"), k.joint_stream(ro),
-                         qlimits, ro.actions, k.action_bounds, k.arm_joints)
-
-
-class TaskRig:
-    """The simulator resources of one task in one worker: expert source, unrendered and rendered replays."""
-
-    def __init__(self, task: str, platform: str):
-        self.kit = kit(platform)
-        self.expert = self.kit.make_expert(task)
-        self.spec = self.expert.spec
-        self.state = self.expert.replayer
-        self.render = self.kit.make_renderer(task, self.spec.objects)
-        self.qlimits = self.state.qlimits
-
-    def close(self) -> None:
-        self.expert.close()
-        self.render.close()
-
-    def invalid(self, ro) -> str | None:
-        return rollout_problem(self.kit, self.qlimits, ro)
-
+from wsp_data.platforms.contract import TaskRig
 
 R = TypeVar("R")
 

@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache, TaskRig
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
+from wsp_data.platforms.contract import Dropped, TaskRig
 from wsp_data.schema import FPS
 from wsp_data.staging import RolloutArrays
 from wsp_eval.video import aligned_mse

@@ -16,10 +16,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache, rollout_problem
-from wsp_data.builders.validity import MAX_JOINT_SPEED
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
 from wsp_data.platforms import BLOCK_STEPS, PlatformKit, joint_blocked, kit  # noqa: F401  (BLOCK_STEPS: T2's rule, read by tests)
+from wsp_data.platforms.contract import Dropped, rollout_problem
+from wsp_data.platforms.validity import MAX_JOINT_SPEED, check_rollout
 from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
@@ -84,8 +85,6 @@ def replay_problem(qpos: np.ndarray, tcp_pose: np.ndarray, object_poses: np.ndar
                    qlimits: np.ndarray) -> str | None:
     """None for a valid donor replay of a joint-target stream (no action bounds), else the drop reason: a common
     check (`check_rollout`), `arm_blocked` or `object_flung` (unintended collisions)."""
-    from wsp_data.builders.validity import check_rollout
-
     if (why := check_rollout(qpos, tcp_pose, object_poses, actions, qlimits)) is not None:
         return why
     if arm_blocked(qpos, actions):

@@ -19,70 +19,33 @@ than `MOTION_MAX` px.
 Thresholds and task choices are documented in docs/suites/t4.md. Which tasks serve which kind, and how a scene is
 edited (what a distractor is, where objects may go), is the platform's: `PlatformKit.t4_kind_tasks` and
 `t4_rig` (on LIBERO a BDDL scene cannot gain a body, so the distractor is one of the scene's own movable
-objects the task does not use, relocated; docs/platforms/libero.md). The shared geometry helpers are here.
+objects the task does not use, relocated; docs/platforms/libero.md). What the rig hands back (`Proposal`,
+`Sight`) and the margins, geometry and false-contact proposal the platforms share are in
+`wsp_data.platforms.contract`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-import cv2
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
+from wsp_data.platforms.contract import KINDS, Dropped, Proposal, T4Rig
+from wsp_data.platforms.interface import Rollout
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.tracking import (
-    GATE_MIN_REFERENCE, LK_WINDOW, MOTION_MAX, QUERY_RADIUS, SCORING_SIZE, frame_size, frame_xy, motion_gate,
-    object_motion, project, scoring_mask, scoring_video, t4_score,
+    GATE_MIN_REFERENCE, MOTION_MAX, frame_size, frame_xy, motion_gate, object_motion, project, scoring_video, t4_score,
 )
-
-KINDS = ("distractor", "false_contact", "spatial_proximity")
 
 POS_TOL = 0.005  # m: an object that never strays this far from its frame-0 position "stays put"
 ROT_TOL = 0.05  # rad: … and never turns this far
-SWEPT_MARGIN = 0.10  # m: a moved target's footprint keeps this far from every low robot link origin
-DISTRACTOR_MARGIN = 0.05  # m: the same for a distractor (a prefilter only: the contact check decides)
-REACH_Z = 0.12  # m: link origins above this height cannot touch a tabletop object (≤ 5 cm tall)
-CLEARANCE = 0.02  # m: gap between a placed object and any other task object (xy bounding boxes)
-WORKSPACE = ((-0.35, 0.25), (-0.35, 0.35))  # m: x and y ranges a target may be moved to (on the table, in view)
-VIEW_MARGIN = QUERY_RADIUS + LK_WINDOW // 2 + 1  # px: the query grid and its windows stay inside the frame
-ROBOT_CLEARANCE = QUERY_RADIUS + 1  # px: no query point on the robot's silhouette at frame 0
-DONOR_TRIES = 12  # donor episodes tried for a distractor placement
-PLACEMENT_TRIES = 256  # random target placements tried for spatial proximity
 MIN_TEXTURED = 5  # of the 9 query points must carry texture at frame 0
 MIN_VISIBLE = 0.5  # fraction of reference frames in which the evaluated object must be tracked
 REFERENCE_D_MAX = MOTION_MAX / 2  # px: the reference's own d must leave a faithful generation this much headroom
 CENTRE_SIGHT_MAX = 1.5  # native px: the evaluated object's nearest visible pixel lies at most this far from its
 #   projected centre at frame 0 (the centre's own pixel or a neighbour, diagonals included). Beyond it the query
 #   grid sits on whatever hides the object (a LIBERO milk carton behind the juice carton: docs/validity.md, T4 tracker)
-
-
-@dataclass
-class Proposal:
-    """What to replay: actions, placements after reset, the recorded objects and the evaluated one."""
-
-    actions: np.ndarray
-    objects: tuple[str, ...]
-    evaluated: str
-    placements: dict[str, np.ndarray]
-    params: dict
-
-    @property
-    def index(self) -> int:
-        return self.objects.index(self.evaluated)
-
-
-def _gap(box: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Distance from each xy point (N, 2) to an xy box."""
-    d = np.maximum(box[0] - points, 0) + np.maximum(points - box[1], 0)
-    return np.linalg.norm(d, axis=-1)
-
-
-def _box_gap(a: np.ndarray, b: np.ndarray) -> float:
-    d = np.maximum(np.maximum(a[0] - b[1], b[0] - a[1]), 0)
-    return float(np.linalg.norm(d))
 
 
 def static(poses: np.ndarray) -> bool:
@@ -117,37 +80,6 @@ def centre_hidden(objects: np.ndarray | None, k: int, pixel: np.ndarray) -> dict
     return {"object_pixels": int((objects == k + 1).sum()), "centre_gap": gap}
 
 
-def false_contact(rig, base, source: np.ndarray, sight: Sight) -> Proposal | str:
-    """The expert's stream with every gripper command clamped fully open throughout (the platform's own
-    gripper dimensions and open value)."""
-    dim, opened = list(np.atleast_1d(rig.kit.gripper_dim)), rig.kit.gripper_open
-    if not (source[:, dim] != opened).any():
-        return "source_never_closes"
-    if not sight(base.observations[0].object_poses[0, :3]):
-        return "object_out_of_sight"
-    actions = source.copy()
-    actions[:, dim] = opened
-    return Proposal(actions, rig.spec.objects, rig.spec.target, {}, {"kind": "false_contact", "gripper": opened})
-
-
-class Sight:
-    """Frame-0 visibility of a world point: `VIEW_MARGIN` px inside the frame and `ROBOT_CLEARANCE` px clear
-    of the robot's silhouette (the frame every model shares)."""
-
-    def __init__(self, intrinsic: np.ndarray, extrinsic: np.ndarray, robot_mask: np.ndarray):
-        self.intrinsic, self.extrinsic, self.size = intrinsic, extrinsic, frame_size(robot_mask)
-        free = (scoring_mask(robot_mask) == 0).astype(np.uint8)
-        self.clearance = cv2.distanceTransform(free, cv2.DIST_L2, 5)  # px to the nearest robot pixel
-
-    def __call__(self, xyz: np.ndarray) -> bool:
-        try:
-            x, y = project(xyz, self.intrinsic, self.extrinsic, self.size)
-        except ValueError:
-            return False
-        inside = VIEW_MARGIN <= min(x, y) and max(x, y) <= SCORING_SIZE - 1 - VIEW_MARGIN
-        return bool(inside and self.clearance[int(round(y)), int(round(x))] >= ROBOT_CLEARANCE)
-
-
 class T4Builder(SuiteBuilder):
     suite = "t4"
     title = "T4 Interaction grounding"
@@ -180,7 +112,7 @@ class T4Builder(SuiteBuilder):
         self.rig.close()
 
     # -- validation -----------------------------------------------------------------------------
-    def violation(self, rig, kind: str, p: Proposal, ro) -> str | None:
+    def violation(self, rig: T4Rig, kind: str, p: Proposal, ro: Rollout) -> str | None:
         """The first failed check of a rollout: common validity (spec §5), then the kind's rule."""
         poses, contacts = ro.stack("object_poses"), ro.stack("contacts")
         if (why := rig.invalid(ro)):

@@ -4,7 +4,8 @@ Proposal: a replay-verified successful expert trajectory of the slot's task; its
 `BACKOFF` steps before first contact (the first frame where a robot link touches the task's target, or the
 target has moved 2 mm, whichever comes first: contacts shorter than a physics substep can go unflagged). The
 expert is re-run up to that step and the slot's primitive replaces the rest: the platform's T5 rig does this
-(`PlatformKit.t5_rig(...).branch`, returning a `Branch`), and may add a prop beside the target
+(`PlatformKit.t5_rig(...).branch`, returning a `Branch`: `wsp_data.platforms.contract` holds it and the
+branch point's helpers), and may add a prop beside the target
 (`PlatformKit.t5_scene`; ManiSkill's knock-over and tap), whose source must succeed with the prop untouched.
 Validation, unrendered first: common validity (spec §5), no other object shifted by more than 1 cm, and the
 primitive's acceptance rule (`t5_rules`, with the platform's `t5_rule_thresholds`) on the evaluated object's
@@ -17,54 +18,24 @@ balanced exactly by primitive over the platform's primitives (`PlatformKit.t5_pr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
-from wsp_data.builders.t5_rules import MOTION_ONSET, check
+from wsp_data.builders.t5_rules import check
+from wsp_data.platforms.contract import Branch, Dropped, T5Rig, max_shift
+from wsp_data.platforms.interface import Rollout
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
 from wsp_eval.object_track import object_track
 from wsp_eval.tracking import frame_size, project
 
-BACKOFF = 4  # steps (0.2 s) before first contact
 OTHER_OBJECT_MAX_SHIFT = 0.01  # m: any other object moving more is an unintended collision
-SOURCE_PROP_MAX_SHIFT = 0.001  # m: a prop must rest untouched through the source trajectory
-
-
-@dataclass
-class Branch:
-    """What a platform's T5 rig hands back for validation (`rig.branch(primitive, seed)`): the verified source
-    stream, the branched stream (source up to `branch`, then the primitive), the scene placements both replay
-    with (None: none), the branch and first-contact steps, the evaluated object's name, and the unrendered
-    simulator steps spent so far."""
-
-    source: np.ndarray
-    stream: np.ndarray
-    placements: dict | None
-    branch: int
-    contact: int
-    evaluated: str
-    simulated: int
-
-
-def first_contact(poses: np.ndarray, contacts: np.ndarray) -> int | None:
-    """First frame where the robot touches the object or the object has moved `MOTION_ONSET` from its start."""
-    moved = np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1) >= MOTION_ONSET
-    hits = np.nonzero(contacts | moved)[0]
-    return int(hits[0]) if len(hits) else None
 
 
 def object_motion_scorable(rgb: np.ndarray, robot: np.ndarray, objects: np.ndarray, ev: int) -> bool:
     """Whether the evaluated object (column `ev`) moves visibly in its reference video (`ObjectTrack.scorable`)."""
     return object_track(rgb, objects, ev + 1, robot).scorable
-
-
-def max_shift(poses: np.ndarray) -> float:
-    """Largest distance of an object from its frame-0 position, (T, 7) poses."""
-    return float(np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1).max())
 
 
 class T5Builder(SuiteBuilder):
@@ -107,7 +78,7 @@ class T5Builder(SuiteBuilder):
             return b
         return self._validate(plan, rig, seed, b)
 
-    def _validate(self, plan: SlotPlan, rig, seed: int, b: Branch) -> Kept | Dropped:
+    def _validate(self, plan: SlotPlan, rig: T5Rig, seed: int, b: Branch) -> Kept | Dropped:
         """Replay the branched stream unrendered, check it, render it, check again, and make the instance."""
         primitive, spec = plan.group, rig.spec
         source, stream, placements, evaluated = b.source, b.stream, b.placements, b.evaluated
@@ -142,7 +113,7 @@ class T5Builder(SuiteBuilder):
         return Kept(row, [RolloutArrays.from_rollout("reference", rendered),
                           RolloutArrays.from_rollout(SOURCE_ROLE, src)], steps + len(source), simulated)
 
-    def reject(self, rig, ro, primitive: str, ev: int) -> str | None:
+    def reject(self, rig: T5Rig, ro: Rollout, primitive: str, ev: int) -> str | None:
         """Why a rollout is not a valid reference of `primitive` on object column `ev`, or None."""
         if (why := rig.invalid(ro)) is not None:
             return why

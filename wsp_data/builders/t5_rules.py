@@ -3,7 +3,9 @@
 Every rule reads only the evaluated object's pose sequence (T, 7: xyz + quaternion wxyz, as stored in
 `sim.object_poses`), its robot–object contact flags (T,) (`sim.contacts`) and the robot base's
 world xy (instance column `robot_base_xy`), so builders, tests and evaluators re-check a reference from the
-release alone. `measure` computes the quantities, `passes` applies one primitive's rule to them.
+release alone. `measure` computes the quantities, `passes` applies one primitive's rule to them. The primitives'
+names (`PRIMITIVES`), the motion onset and quaternion rotations are shared with the platforms' scripts
+(`wsp_data.platforms.contract`).
 
 Thresholds: the paper's for push, drag, rotate, shake, knock-over and drop. ManiSkill has no articulated assets
 offline, so pull and tap (paper: task success or articulation change ≥ 0.05) get object-displacement
@@ -28,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-PRIMITIVES = ("push", "pull", "drag", "rotate", "shake", "tap", "knock-over", "drop")
+from wsp_data.platforms.contract import MOTION_ONSET, PRIMITIVES, rotation_matrices
 
 PUSH_MIN_XY = 0.015  # m
 PULL_MIN_TOWARD_BASE = 0.05  # m
@@ -43,23 +45,10 @@ SHAKE_REVERSAL_XY = 0.01  # m a reversal must retreat from the last extreme
 SHAKE_REVERSAL_YAW = 0.03  # rad
 TAP_MIN_XY = 0.05  # m
 TAP_MAX_CONTACT_STEPS = 6  # frames (0.3 s at 20 Hz)
-MOTION_ONSET = 0.002  # m: the object "starts moving" once it is this far from its start
 KNOCK_MIN_TILT = 0.50  # rad
 KNOCK_MIN_TILT_INCREASE = 0.35  # rad
 DROP_MIN_LIFT = 0.04  # m
 DROP_MIN_FALL = 0.04  # m
-
-
-def rotation_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
-    """(T, 4) unit quaternions (wxyz) → (T, 3, 3) rotation matrices."""
-    q = np.asarray(quat_wxyz, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)
 
 
 def yaw_track(quat_wxyz: np.ndarray) -> np.ndarray:

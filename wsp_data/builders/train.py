@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
-from wsp_data.builders.rig import RigCache, TaskRig
+from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
+from wsp_data.builders.rig import RigCache
+from wsp_data.platforms.contract import Dropped, TaskRig
 from wsp_data.staging import RolloutArrays
 
 EPISODES_PER_TASK = 100  # default size: 100 expert episodes per task

@@ -3,7 +3,9 @@
 A platform (a simulator with its tasks, expert, action sources and scene edits) is a `PlatformKit` subclass
 instance registered in `wsp_data.platforms.KITS` (built-in) or declared through the entry-point group
 `worldsimprobe.platforms` (third party). Builders (`wsp_data.builders`) never name a platform: everything
-simulator-specific they need comes through the hooks below. docs/guides/adding-a-platform.md walks through them.
+simulator-specific they need comes through the hooks below, and the types the hooks hand out and take back
+(rigs, proposals, drop reasons) are in `wsp_data.platforms.contract`, which builders and platforms both import.
+docs/guides/adding-a-platform.md walks through them.
 
 Hooks are grouped by the suites that call them:
 
@@ -33,12 +35,15 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Hashable, Sequence
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import TYPE_CHECKING, ClassVar
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from wsp_data.schema import PlatformInfo
+
+if TYPE_CHECKING:  # the contract imports this module: its types are named here for annotations only
+    from wsp_data.platforms.contract import ExpertSource, Replayer, T4Rig, T5Rig, TaskSpec
 
 ARM = 7  # arm joints
 BLOCK_RAD = 0.15  # rad an arm joint may lag its target …
@@ -136,13 +141,10 @@ class PlatformKit(ABC):
         `finger_dims`, `finger_closed_below`: state columns of finger joints and the |position| below which a
             finger closed on something (m; T4 drops a false contact whose fingers closed).
 
-    Objects the hooks return (duck-typed, see docs/guides/adding-a-platform.md):
-        task spec: `.name`, `.instruction` (str), `.objects` (tuple of recorded object names, target first),
-            `.target` (str).
-        platform (a replayer): `.replay(seed, actions, placements=None) -> Rollout`, `.reset(seed) ->
-            Observation`, `.qlimits` ((S, 2) rad / m joint limits, the state's columns), `.camera_params()`, `.close()`.
-        expert source: `.trajectory(seed) -> (T, D) float32 | None` (None: no verified success on that
-            seed), `.replayer` (an unrendered platform), `.spec`, `.close()`.
+    Objects the hooks return are the protocols of `wsp_data.platforms.contract` (docs/guides/adding-a-platform.md):
+        `TaskSpec` (`tasks`), `ExpertSource` (`make_expert`), `Replayer` (`make_renderer`, an expert source's
+        `replayer`), `T4Rig` (`t4_rig`), `T5Rig` (`t5_rig`); what the rigs hand back (`Proposal`, `Branch`,
+        `Dropped`) and the helpers they share are in the same module.
     """
 
     name: ClassVar[str]
@@ -179,7 +181,7 @@ class PlatformKit(ABC):
 
     # -- core ---------------------------------------------------------------------------------------------
     @abstractmethod
-    def tasks(self) -> dict:
+    def tasks(self) -> dict[str, TaskSpec]:
         """The platform's benchmark tasks.
 
         Returns:
@@ -189,12 +191,12 @@ class PlatformKit(ABC):
         """
 
     @abstractmethod
-    def make_expert(self, task: str):
+    def make_expert(self, task: str) -> ExpertSource:
         """The verified scripted expert of `task`.
 
         Returns:
-            an expert source (`.trajectory(seed)`, `.replayer`, `.spec`, `.close()`); its trajectories are
-            native action streams (T, D) float32 that replay to task success on the unrendered replayer.
+            an `ExpertSource`; its trajectories are native action streams (T, D) float32 that replay to task
+            success on the unrendered replayer.
             Optionally `.scripted(seed)`: the stream before that verifying replay, for a builder whose next
             step is a rendered replay that checks success itself (train), which then skips the unrendered one.
         Called:
@@ -202,11 +204,11 @@ class PlatformKit(ABC):
         """
 
     @abstractmethod
-    def make_renderer(self, task: str, objects: Sequence[str]):
+    def make_renderer(self, task: str, objects: Sequence[str]) -> Replayer:
         """A rendering replayer of `task` that records `objects` (pose and contact columns, in order).
 
         Returns:
-            a platform whose `replay` fills `Observation.rgb` ((H, W, 3) uint8, `info.height` × `info.width`)
+            a `Replayer` whose `replay` fills `Observation.rgb` ((H, W, 3) uint8, `info.height` × `info.width`)
             `.mask` ((H, W) uint8: 0 not robot, 1 arm, 2 wrist/hand/fingers) and `.objects` ((H, W) uint8: k + 1
             where recorded object k is the visible surface, else 0) of every frame, and sets the rollout's camera
             `intrinsic` (3, 3) and `extrinsic` (3, 4, OpenCV world→camera, m).
@@ -224,7 +226,7 @@ class PlatformKit(ABC):
         Units:
             rad (arm joints).
         Called:
-            on every replay a builder validates (`wsp_data.builders.rig.rollout_problem`).
+            on every replay a builder validates (`wsp_data.platforms.contract.rollout_problem`).
         """
 
     @abstractmethod
@@ -302,15 +304,14 @@ class PlatformKit(ABC):
         """What a task must be to serve the `missing` kinds (the end of T4's refusal message)."""
         return "a task that serves them"
 
-    def t4_rig(self, task: str):
+    def t4_rig(self, task: str) -> T4Rig:
         """One task's T4 simulators and scene edits (see docs/guides/adding-a-platform.md, "T4").
 
         Returns:
-            a rig with `.kit`, `.spec`, `.expert`, `.state` / `.render` (unrendered / rendered platforms),
-            `.invalid(rollout) -> str | None`, `.sight(seed)` (a `wsp_data.builders.t4.Sight`),
-            `.replay(platform, seed, proposal) -> Rollout` and the three kinds' proposals
-            `.distractor / .false_contact / .spatial_proximity(base, source, sight, rng) -> Proposal | str`
-            (a `wsp_data.builders.t4.Proposal`, or the drop reason). Placements are world poses (m, wxyz).
+            a `T4Rig`: `.kit`, `.spec`, `.expert`, `.state` / `.render` (unrendered / rendered replayers),
+            `.invalid(rollout) -> str | None`, `.sight(seed) -> Sight`, `.replay(platform, seed, proposal) ->
+            Rollout` and the three kinds' proposals `.distractor / .false_contact / .spatial_proximity(base,
+            source, sight, rng) -> Proposal | str` (the drop reason). Placements are world poses (m, wxyz).
         Called:
             once per task per build worker; proposals once per attempt, drawing only from `rng`.
         """
@@ -318,7 +319,7 @@ class PlatformKit(ABC):
 
     # -- T5 -----------------------------------------------------------------------------------------------
     def t5_primitives(self) -> tuple[str, ...]:
-        """The primitives (a subset of `wsp_data.builders.t5_rules.PRIMITIVES`) this platform scripts, in slot
+        """The primitives (a subset of `wsp_data.platforms.contract.PRIMITIVES`) this platform scripts, in slot
         order; T5 balances slots over exactly these.
 
         Called:
@@ -348,14 +349,14 @@ class PlatformKit(ABC):
         """
         return None
 
-    def t5_rig(self, task: str, scene: Hashable):
+    def t5_rig(self, task: str, scene: Hashable) -> T5Rig:
         """One task's T5 simulators (with the `scene` addition).
 
         Returns:
-            a rig with `.spec`, `.objects` (recorded object names), `.state` / `.render`, `.invalid(rollout)`,
+            a `T5Rig`: `.spec`, `.objects` (recorded object names), `.state` / `.render`, `.invalid(rollout)`,
             `.base_xy()` (robot base world xy, m, a list of 2 floats) and
-            `.branch(primitive, seed) -> Branch | Dropped`: the verified source stream and the branched one
-            (`wsp_data.builders.t5.Branch`), or why the attempt is dropped.
+            `.branch(primitive, seed) -> Branch | Dropped`: the verified source stream and the branched one,
+            or why the attempt is dropped.
         Called:
             once per (task, scene) per build worker.
         """

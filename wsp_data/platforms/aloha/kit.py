@@ -114,7 +114,7 @@ class AlohaKit(PlatformKit):
 
     # -- T5 -----------------------------------------------------------------------------------------------
     def t5_primitives(self) -> tuple[str, ...]:
-        from wsp_data.builders.t5_rules import PRIMITIVES
+        from wsp_data.platforms.contract import PRIMITIVES
 
         return PRIMITIVES  # all eight; knock-over on a prop (`t5_scene`)
 

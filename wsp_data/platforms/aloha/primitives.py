@@ -36,6 +36,7 @@ from wsp_data.platforms.aloha.env import OBJECTS, AlohaPlatform
 from wsp_data.platforms.aloha.experts import (
     ARM_NAMES, FINGERTIP, PUSH_HEIGHT, V, ArmIK, Hand, OutOfTime, Script, cube_yaw,
 )
+from wsp_data.platforms.contract import box_gap
 
 # the arm that first touches each task's target in its expert (measured; two_arm_lift's arms touch the bar on
 # the same step: the right one acts, as on every other task but hand_over)
@@ -91,10 +92,6 @@ def xy_box(p: AlohaPlatform, name: str, offset=(0.0, 0.0)) -> np.ndarray:
     return np.stack([xy.min(0), xy.max(0)])
 
 
-def _box_gap(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.linalg.norm(np.maximum(np.maximum(a[0] - b[1], b[0] - a[1]), 0)))
-
-
 def _inside(box: np.ndarray, area=TABLE) -> float:
     """How far an xy box lies inside `area` (default `TABLE`; negative: outside)."""
     lo, hi = np.array([area[0][0], area[1][0]]), np.array([area[0][1], area[1][1]])
@@ -108,7 +105,7 @@ def room(p: AlohaPlatform, name: str, d: np.ndarray, reach: float, others: tuple
     gaps = []
     for t in np.linspace(0.0, reach, 6):
         moved = xy_box(p, name, t * d[:2])
-        gaps += [_inside(moved), *(_box_gap(moved, b) for b in boxes)]
+        gaps += [_inside(moved), *(box_gap(moved, b) for b in boxes)]
     return min(gaps)
 
 
@@ -294,7 +291,7 @@ def fall_direction(p: AlohaPlatform, arm: int, xy: np.ndarray, objects: tuple[st
         gaps = []
         for t in np.linspace(0.0, FALL_LENGTH, 6):
             box = np.stack([xy - half, xy + half]) + t * d[:2]
-            gaps += [_inside(box, FALL_AREA), *(_box_gap(box, b) for b in boxes)]
+            gaps += [_inside(box, FALL_AREA), *(box_gap(box, b) for b in boxes)]
         return min(gaps)
 
     across = np.array([-u[1], u[0], 0.0])
@@ -347,7 +344,7 @@ def prop_placements(p: AlohaPlatform, task: str, seed: int) -> list[dict[str, np
                                                                    for s in (1.0, -1.0)]:
         box = np.stack([xy - half, xy + half])
         if (_inside(box, PROP_AREA) >= 0 and np.linalg.norm(xy - base_xy(p, arm)) >= PROP_BASE_CLEARANCE
-                and all(_box_gap(box, xy_box(p, o)) >= 0.04 for o in spec.objects)
+                and all(box_gap(box, xy_box(p, o)) >= 0.04 for o in spec.objects)
                 and fall_direction(p, arm, xy, spec.objects)[1] >= 0.02):
             out.append({PROP: np.array([*xy, OBJECTS[PROP].rest_z, 1.0, 0.0, 0.0, 0.0])})
     return out

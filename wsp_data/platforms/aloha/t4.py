@@ -2,7 +2,7 @@
 
 - distractor: the scene's spare yellow cube (parked out of sight) placed on the table, in view, clear of both
   arms' swept region; the expert's stream must still succeed around it.
-- false contact: the expert's stream with both grippers clamped open (`wsp_data.builders.t4.false_contact`).
+- false contact: the expert's stream with both grippers clamped open (`wsp_data.platforms.contract.false_contact`).
 - spatial proximity: the task's target moved, in xy only, out of both arms' swept region.
 
 The swept region is the xy of every robot body origin that comes lower than `REACH_Z` above the table in the
@@ -15,10 +15,9 @@ import itertools
 
 import numpy as np
 
-from wsp_data.builders.rig import TaskRig
-from wsp_data.builders.t4 import (
-    CLEARANCE, DISTRACTOR_MARGIN, KINDS, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, Proposal, Sight, _box_gap, _gap,
-    false_contact,
+from wsp_data.platforms.contract import (
+    CLEARANCE, DISTRACTOR_MARGIN, KINDS, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, Proposal, Sight, TaskRig, box_gap,
+    false_contact, point_gaps, rotation_matrices,
 )
 from wsp_data.schema import MAX_OBJECTS
 
@@ -71,7 +70,6 @@ class AlohaTaskRig(TaskRig):
     # -- geometry -------------------------------------------------------------------------------
     def _box(self, name: str, pose: np.ndarray) -> np.ndarray:
         """The xy box (2, 2: min, max; m) of object `name` at world `pose` (its box parts' corners)."""
-        from wsp_data.builders.t5_rules import rotation_matrices
         from wsp_data.platforms.aloha.env import OBJECTS
 
         R = rotation_matrices(pose[None, 3:])[0]
@@ -95,8 +93,8 @@ class AlohaTaskRig(TaskRig):
             to = start.copy()
             to[:2], to[2] = xy, OBJECTS[name].rest_z
             box = self._box(name, to)
-            if (sight(to[:3]) and _gap(box, footprint).min(initial=np.inf) >= margin
-                    and all(_box_gap(box, b) >= CLEARANCE for b in others)):
+            if (sight(to[:3]) and point_gaps(box, footprint).min(initial=np.inf) >= margin
+                    and all(box_gap(box, b) >= CLEARANCE for b in others)):
                 return to
         return None
 

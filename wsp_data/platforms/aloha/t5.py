@@ -4,10 +4,10 @@ acts on a prop (`primitives.PROP`) that the rig's scene adds beside the target."
 
 from __future__ import annotations
 
-from wsp_data.builders.base import Dropped
-from wsp_data.builders.rig import rollout_problem
-from wsp_data.builders.t5 import BACKOFF, SOURCE_PROP_MAX_SHIFT, Branch, first_contact, max_shift
 from wsp_data.platforms import kit
+from wsp_data.platforms.contract import (
+    BACKOFF, PRIMITIVES, SOURCE_PROP_MAX_SHIFT, Branch, Dropped, first_contact, max_shift, rollout_problem,
+)
 
 # (primitive, task) pairs T5 never draws, with the measured reason (unrendered sweep, 20 seeds per pair); every
 # other pair kept all 20 proposals but knock-over on two_arm_lift (16: no room for the prop)
@@ -26,8 +26,6 @@ EXCLUDED = {
 def primitive_tasks(tasks: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
     """The selected tasks serving each primitive, in their order: all of them but the `EXCLUDED` pairs (the
     six cube tasks serve all eight primitives; the peg and the bar five and six)."""
-    from wsp_data.builders.t5_rules import PRIMITIVES
-
     return {p: tuple(t for t in tasks if (p, t) not in EXCLUDED) for p in PRIMITIVES}
 
 

@@ -1,14 +1,13 @@
 """T4 on LIBERO: the task rig that proposes the three kinds' scene edits on a BDDL scene, for the platform-free
-builder `wsp_data/builders/t4.py` (docs/platforms/libero.md)."""
+builder `wsp_data/builders/t4.py`, through `wsp_data.platforms.contract` (docs/platforms/libero.md)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.rig import TaskRig
-from wsp_data.builders.t4 import (
-    CLEARANCE, DISTRACTOR_MARGIN, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, Proposal, Sight, _box_gap, _gap,
-    false_contact,
+from wsp_data.platforms.contract import (
+    CLEARANCE, DISTRACTOR_MARGIN, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, Proposal, Sight, TaskRig, box_gap,
+    false_contact, point_gaps,
 )
 from wsp_data.schema import MAX_OBJECTS
 
@@ -65,8 +64,8 @@ class LiberoTaskRig(TaskRig):
             moved = box + (xy - pose[:2])
             to = pose.copy()
             to[:2] = xy
-            if (sight(to[:3]) and _gap(moved, footprint).min(initial=np.inf) >= margin
-                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
+            if (sight(to[:3]) and point_gaps(moved, footprint).min(initial=np.inf) >= margin
+                    and all(box_gap(moved, b) >= CLEARANCE for b in others)):
                 return pose, to
         return None
 

@@ -4,9 +4,7 @@
 
 from __future__ import annotations
 
-from wsp_data.builders.base import Dropped
-from wsp_data.builders.rig import TaskRig
-from wsp_data.builders.t5 import BACKOFF, Branch, first_contact
+from wsp_data.platforms.contract import BACKOFF, Branch, Dropped, TaskRig, first_contact
 from wsp_data.platforms.libero.primitives import branch_stream
 
 

@@ -93,14 +93,15 @@ def _env_class(env_id: str, extras: tuple[ExtraActor, ...]):
     return SceneWithExtras
 
 
-def _np(x) -> np.ndarray:
+def to_numpy(x) -> np.ndarray:
+    """A torch tensor (any device) or array-like as a numpy array."""
     return x.detach().cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
 
 
 def euler_xyz(q) -> np.ndarray:
     """A quaternion (wxyz) as the XYZ Euler angles `pd_ee_pose` takes for its target orientation."""
     rot = rotation_conversions.quaternion_to_matrix(torch.as_tensor(np.asarray(q), dtype=torch.float64))
-    return _np(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))
+    return to_numpy(rotation_conversions.matrix_to_euler_angles(rot, "XYZ"))
 
 
 class ManiSkillPlatform:
@@ -143,7 +144,7 @@ class ManiSkillPlatform:
     @property
     def qlimits(self) -> np.ndarray:
         """(9, 2) lower/upper limits of the 7 arm and 2 finger joints."""
-        return _np(self.robot.get_qlimits()[0])
+        return to_numpy(self.robot.get_qlimits()[0])
 
     def actor(self, name: str) -> Actor:
         a = getattr(self.u, name, None)
@@ -201,20 +202,20 @@ class ManiSkillPlatform:
         contacts = np.zeros(MAX_OBJECTS, dtype=bool)
         for i, name in enumerate(self.object_names):
             a = self.actor(name)
-            poses[i] = _np(a.pose.raw_pose[0])
+            poses[i] = to_numpy(a.pose.raw_pose[0])
             contacts[i] = self.robot_touches(a)
         ob = Observation(
-            qpos=_np(self.robot.get_qpos()[0]).astype(np.float32),
-            tcp_pose=_np(u.agent.tcp.pose.raw_pose[0]).astype(np.float32),
-            object_poses=poses, contacts=contacts, success=bool(_np(u.evaluate()["success"]).reshape(-1)[0]),
+            qpos=to_numpy(self.robot.get_qpos()[0]).astype(np.float32),
+            tcp_pose=to_numpy(u.agent.tcp.pose.raw_pose[0]).astype(np.float32),
+            object_poses=poses, contacts=contacts, success=bool(to_numpy(u.evaluate()["success"]).reshape(-1)[0]),
         )
         if self.render:
             cam = obs["sensor_data"][CAMERA]
-            ob.rgb = _np(cam["rgb"][0]).astype(np.uint8)
+            ob.rgb = to_numpy(cam["rgb"][0]).astype(np.uint8)
             if self._luts is None:
                 self._luts = self._label_luts()
             robot_lut, object_lut = self._luts
-            seg = np.clip(_np(cam["segmentation"][0, ..., 0]).astype(np.int64), 0, len(robot_lut) - 1)
+            seg = np.clip(to_numpy(cam["segmentation"][0, ..., 0]).astype(np.int64), 0, len(robot_lut) - 1)
             ob.mask, ob.objects = robot_lut[seg], object_lut[seg]
         return ob
 
@@ -229,7 +230,7 @@ class ManiSkillPlatform:
     def camera_params(self) -> tuple[np.ndarray, np.ndarray]:
         cam = self.u.scene.sensors[CAMERA]
         p = cam.get_params()
-        return _np(p["intrinsic_cv"][0]).astype(np.float32), _np(p["extrinsic_cv"][0]).astype(np.float32)
+        return to_numpy(p["intrinsic_cv"][0]).astype(np.float32), to_numpy(p["extrinsic_cv"][0]).astype(np.float32)
 
     # -- kinematics -------------------------------------------------------------------------------
     def ee_action(self, joint_action: np.ndarray) -> np.ndarray:

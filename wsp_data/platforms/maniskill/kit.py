@@ -68,7 +68,7 @@ class ManiSkillKit(PlatformKit):
 
     # -- T4 -----------------------------------------------------------------------------------------------
     def t4_kind_tasks(self, tasks: tuple[str, ...]) -> dict[str, tuple[str, ...]]:
-        from wsp_data.builders.t4 import KINDS
+        from wsp_data.platforms.contract import KINDS
         from wsp_data.platforms.maniskill.t4 import KIND_TASKS
 
         return {k: tuple(t for t in tasks if t in KIND_TASKS[k]) for k in KINDS}
@@ -85,7 +85,7 @@ class ManiSkillKit(PlatformKit):
 
     # -- T5 -----------------------------------------------------------------------------------------------
     def t5_primitives(self) -> tuple[str, ...]:
-        from wsp_data.builders.t5_rules import PRIMITIVES
+        from wsp_data.platforms.contract import PRIMITIVES
 
         return PRIMITIVES  # all eight
 

@@ -15,7 +15,7 @@ import sapien
 import torch
 
 from wsp_data.platforms.maniskill.env import (
-    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, _np, euler_xyz,
+    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, euler_xyz, to_numpy,
 )
 
 STEP_M = 0.012  # TCP translation per control step (0.24 m/s at 20 Hz)
@@ -63,14 +63,14 @@ class SkillScript:
         return self.platform.actor(actor).pose.sp
 
     def success(self) -> bool:
-        return bool(_np(self.u.evaluate()["success"]).reshape(-1)[0])
+        return bool(to_numpy(self.u.evaluate()["success"]).reshape(-1)[0])
 
     # -- primitive step -------------------------------------------------------------------------
     def _command(self, target: sapien.Pose) -> None:
         rel = self.u.agent.robot.pose.sp.inv() * target
         cmd = np.array([*rel.p, *euler_xyz(rel.q), self.grip], dtype=np.float32)
         self.platform.env.step(torch.as_tensor(cmd)[None])
-        q = _np(self.u.agent.controller.controllers["arm"]._target_qpos[0])
+        q = to_numpy(self.u.agent.controller.controllers["arm"]._target_qpos[0])
         self.actions.append(np.array([*q, self.grip], dtype=np.float32))
         self._target = target
 

@@ -1,17 +1,17 @@
 """T4 on ManiSkill: which tasks serve which kind, the distractor palette, and the task rig that proposes the
-three kinds' scene edits, for the platform-free builder `wsp_data/builders/t4.py` (docs/suites/t4.md).
+three kinds' scene edits, for the platform-free builder `wsp_data/builders/t4.py` (docs/suites/t4.md), through
+`wsp_data.platforms.contract`.
 Placements are computed in SAPIEN's pose convention (float32)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.rig import rollout_problem
-from wsp_data.builders.t4 import (
-    CLEARANCE, DISTRACTOR_MARGIN, DONOR_TRIES, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, WORKSPACE, Proposal, Sight,
-    _box_gap, _gap, false_contact,
-)
 from wsp_data.platforms import kit
+from wsp_data.platforms.contract import (
+    CLEARANCE, DISTRACTOR_MARGIN, DONOR_TRIES, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, WORKSPACE, Proposal, Sight,
+    box_gap, false_contact, point_gaps, rollout_problem,
+)
 from wsp_data.schema import MAX_OBJECTS, SEED_BASE, SEED_SPAN
 
 # Which tasks serve which kind (docs/suites/t4.md): false contact needs an expert that grasps the target; spatial
@@ -109,8 +109,8 @@ class TaskRig:
             yaw = np.arctan2(*_rotation(donor_pose[3:])[[1, 0], 0])
             pose = np.array([*donor_pose[:2], h, np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
             box = np.stack([pose[:2] - r, pose[:2] + r])
-            if (sight(pose[:3]) and _gap(box, footprint).min(initial=np.inf) >= DISTRACTOR_MARGIN
-                    and all(_box_gap(box, b) >= CLEARANCE for b in boxes)):
+            if (sight(pose[:3]) and point_gaps(box, footprint).min(initial=np.inf) >= DISTRACTOR_MARGIN
+                    and all(box_gap(box, b) >= CLEARANCE for b in boxes)):
                 params = {"kind": "distractor", "donor_seed": int(donor), "shape": extra.shape,
                           "half_size": h, "color": list(extra.color), "pose": pose.tolist()}
                 return Proposal(source, objects + (extra.name,), extra.name, {extra.name: pose}, params)
@@ -130,8 +130,8 @@ class TaskRig:
             moved = box + (xy - poses[0, :2])
             pose = poses[0].copy()
             pose[:2] = xy
-            if (sight(pose[:3]) and _gap(moved, footprint).min(initial=np.inf) >= SWEPT_MARGIN
-                    and all(_box_gap(moved, b) >= CLEARANCE for b in others)):
+            if (sight(pose[:3]) and point_gaps(moved, footprint).min(initial=np.inf) >= SWEPT_MARGIN
+                    and all(box_gap(moved, b) >= CLEARANCE for b in others)):
                 params = {"kind": "spatial_proximity", "from": poses[0].tolist(), "to": pose.tolist()}
                 return Proposal(source, objects, target, {target: pose}, params)
         return "no_clear_placement"

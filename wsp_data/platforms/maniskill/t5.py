@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.builders.base import Dropped
-from wsp_data.builders.rig import rollout_problem
-from wsp_data.builders.t5 import BACKOFF, SOURCE_PROP_MAX_SHIFT, Branch, first_contact, max_shift
 from wsp_data.platforms import kit
+from wsp_data.platforms.contract import (
+    BACKOFF, SOURCE_PROP_MAX_SHIFT, Branch, Dropped, first_contact, max_shift, rollout_problem,
+)
 
 # Which tasks serve which primitive. The evaluated object is the task's target (first object), except for
 # knock-over and tap, whose evaluated object is their prop (`PROPS`): the tasks' own objects are no tall

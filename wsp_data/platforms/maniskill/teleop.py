@@ -52,7 +52,7 @@ import sapien
 from PIL import Image
 
 from wsp_data.platforms.maniskill.env import (
-    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, Observation, _np, euler_xyz,
+    GRIPPER_CLOSED, GRIPPER_OPEN, ManiSkillPlatform, Observation, euler_xyz, to_numpy,
 )
 from wsp_data.schema import ACTION_DIM, FPS
 from wsp_eval.local_http import JsonRequestHandler
@@ -104,7 +104,7 @@ class _LiveScript(SkillScript):
         rel = self.u.agent.robot.pose.sp.inv() * target
         cmd = np.array([*rel.p, *euler_xyz(rel.q), self.grip], dtype=np.float32)
         ob = self.platform.step(cmd)
-        q = _np(self.u.agent.controller.controllers["arm"]._target_qpos[0])
+        q = to_numpy(self.u.agent.controller.controllers["arm"]._target_qpos[0])
         self.actions.append(np.array([*q, self.grip], dtype=np.float32))
         self.targets.append(np.array([*target.p, *target.q], dtype=np.float32))
         prev = self.observations[-1]
