@@ -45,7 +45,7 @@ SUITE_PAGES = {"t1": "../suites/t1.md", "t2": "../suites/t2.md", "t3": "../suite
 # tasks (`TaskSpec(name, objects, instruction, …)` / `AlohaTask(name, instruction, objects, …)` calls, or a tuple
 # of names) and T3's tasks.
 TASK_SOURCES = {
-    "maniskill": {"tasks": ("maniskill/experts.py", "TASKS"), "t3": ("maniskill/policies.py", "T3_TASKS")},
+    "maniskill": {"tasks": ("maniskill/experts.py", "TASKS"), "t3": ("maniskill/t3.py", "T3_TASKS")},
     "libero": {"tasks": ("libero/experts.py", "BENCHMARK_TASKS"), "t3": ("libero/t3.py", "T3_TASKS")},
     "aloha": {"tasks": ("aloha/env.py", "TASK_LIST"), "t3": ("aloha/t3.py", "T3_TASKS")},
 }

@@ -401,5 +401,5 @@ def test_t3_missing_checkpoint_names_the_rebuild_command(tmp_path):
     from wsp_data.platforms.aloha.t3 import AlohaPolicySource
     from wsp_data.platforms.bc_policy import PolicyCheckpointMissing
 
-    with pytest.raises(PolicyCheckpointMissing, match="train_aloha_policies.py"):
+    with pytest.raises(PolicyCheckpointMissing, match="train_bc_policies.py --platform aloha"):
         AlohaPolicySource("lift_cube", "late", checkpoint_dir=tmp_path)

@@ -68,5 +68,5 @@ def test_policy_checkpoints_run_deterministically_and_replay(stage):
 
 
 def test_missing_checkpoint_names_the_rebuild_command(tmp_path):
-    with pytest.raises(PolicyCheckpointMissing, match="train_libero_policies.py"):
+    with pytest.raises(PolicyCheckpointMissing, match="train_bc_policies.py --platform libero"):
         LiberoPolicySource(TASK, "late", checkpoint_dir=tmp_path)

@@ -9,7 +9,7 @@ import pytest
 
 from wsp_data.platforms.maniskill.env import ManiSkillPlatform
 from wsp_data.platforms.maniskill.experts import ExpertSource
-from wsp_data.platforms.maniskill.operators import (
+from wsp_data.platforms.maniskill.t3 import (
     OPERATORS, T3_TASKS, OperatorSource, OperatorStyle, stream_metrics,
 )
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from wsp_data.platforms.bc_policy import STAGES, TRAINING_CONFIG, PolicyCheckpointMissing, closed_loop_success
-from wsp_data.platforms.maniskill.policies import CHECKPOINT_DIR, T3_TASKS, PolicySource, checkpoint_path, feature_names
+from wsp_data.platforms.maniskill.t3 import CHECKPOINT_DIR, T3_TASKS, PolicySource, checkpoint_path, feature_names
 
 
 @pytest.mark.parametrize("task", T3_TASKS)
@@ -37,7 +37,7 @@ def test_missing_checkpoint_names_path_and_script(tmp_path):
         PolicySource("PickCube", "late", checkpoint_dir=tmp_path)
     assert isinstance(err.value, PolicyCheckpointMissing)
     msg = str(err.value)
-    assert str(tmp_path / "PickCube_late.pt") in msg and "scripts/train_policies.py" in msg
+    assert str(tmp_path / "PickCube_late.pt") in msg and "scripts/train_bc_policies.py --platform maniskill" in msg
     with pytest.raises(KeyError):
         PolicySource("PickCube", "middle")
     with pytest.raises(KeyError):

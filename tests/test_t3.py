@@ -27,7 +27,7 @@ def ds(suites_release):
 
 
 def test_source_groups_match_the_sources():
-    from wsp_data.platforms.maniskill.operators import OPERATORS
+    from wsp_data.platforms.maniskill.t3 import OPERATORS
     from wsp_data.platforms.bc_policy import STAGES
 
     assert OPERATOR_GROUPS == tuple(OPERATORS) and POLICY_GROUPS == tuple(f"policy_{s}" for s in STAGES)

@@ -13,7 +13,9 @@ worker), so all eight land on the same seed; slot k's attempt a uses candidate a
 stream. Columns: `source_group`, `source_kind` (scripted_expert / scripted_operator / bc_policy / human_teleop),
 `source_provenance` (JSON: operator parameters, or checkpoint, training steps and measured success),
 `group_id` (task and seed), `source_success`, `steps`.
-The tasks that have operators and policies are the platform's (`PlatformKit.t3_tasks`).
+The tasks that have operators and policies are the platform's (`PlatformKit.t3_tasks`). Every source, the
+expert included (`ExpertStream`), is asked the same thing: `stream(seed)`, the T3 source protocol of
+`wsp_data.platforms.t3_sources`.
 """
 
 from __future__ import annotations
@@ -24,13 +26,15 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Dropped, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache, TaskRig
+from wsp_data.platforms.t3_sources import ExpertStream, SourceStream, T3Source
 from wsp_data.schema import FPS
 from wsp_data.staging import RolloutArrays
 from wsp_eval.flow import active_pixels_per_window, reference_flows
 
 OPERATOR_GROUPS = ("H1", "H2", "H3", "H4", "H5")  # each platform's operator models (tested)
 POLICY_GROUPS = ("policy_early", "policy_late")  # each platform's policy stages (tested)
-SOURCE_GROUPS = ("expert", *OPERATOR_GROUPS, *POLICY_GROUPS)
+EXPERT_GROUP = "expert"
+SOURCE_GROUPS = (EXPERT_GROUP, *OPERATOR_GROUPS, *POLICY_GROUPS)
 GROUP_SIZE = len(SOURCE_GROUPS)
 
 
@@ -40,24 +44,17 @@ class _Rig(TaskRig):
     def __init__(self, task: str, platform: str):
         super().__init__(task, platform)
         self.task = task
-        self._sources: dict[str, object] = {}
+        self._sources: dict[str, T3Source] = {
+            EXPERT_GROUP: ExpertStream(self.expert, self.kit.expert_script(task))}
 
-    def source(self, group: str):
+    def source(self, group: str) -> T3Source:
         if group not in self._sources:
             self._sources[group] = self.kit.t3_source(self.task, group)
         return self._sources[group]
 
-    def stream(self, group: str, seed: int) -> tuple[np.ndarray | None, dict]:
+    def stream(self, group: str, seed: int) -> SourceStream:
         """The group's action stream on `seed` and its provenance (stream None: the source produced none)."""
-        if group == "expert":
-            provenance = {"kind": "scripted_expert", "script": self.kit.expert_script(self.task)}
-            return self.expert.trajectory(seed), provenance
-        src = self.source(group)
-        if group in OPERATOR_GROUPS:
-            actions = src.attempt(seed).actions  # failures are kept: the caller replays and records success
-        else:
-            actions, _ = src.trajectory(seed)
-        return actions, src.provenance
+        return self.source(group).stream(seed)
 
     def close(self) -> None:
         for s in self._sources.values():
@@ -105,15 +102,15 @@ class T3Builder(SuiteBuilder):
         rig = self.rig(task)
         streams = {}
         for group in SOURCE_GROUPS:
-            actions, provenance = rig.stream(group, seed)
-            if actions is None:
-                return "expert_failed" if group == "expert" else f"{group}_no_stream"
-            ro = rig.state.replay(seed, actions)
-            if group == "expert" and not ro.success:
+            stream = rig.stream(group, seed)
+            if stream.actions is None:
+                return "expert_failed" if group == EXPERT_GROUP else f"{group}_no_stream"
+            ro = rig.state.replay(seed, stream.actions)
+            if group == EXPERT_GROUP and not ro.success:
                 return "expert_failed"
             if (why := rig.invalid(ro)) is not None:
                 return f"{group}_{why}"
-            streams[group] = (actions, provenance, bool(ro.success))
+            streams[group] = (stream.actions, stream.provenance, bool(ro.success))
         return streams
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:

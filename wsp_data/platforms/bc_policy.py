@@ -2,27 +2,32 @@
 small state → action MLP (`bc_model`), run closed-loop in the platform's own state-only simulator until success
 has held `SETTLE_STEPS` consecutive steps or `MAX_STEPS_FACTOR` × the expert's mean length ran out.
 
-A platform subclasses `BCPolicySource` with what differs: its tasks, checkpoint folder, training script and docs
-(class attributes), its state features (`feature_names`) and, in `act`, how an observation becomes the network's
+A platform subclasses `BCPolicySource` with what differs: its name, tasks and checkpoint paths (class
+attributes), its state features (`feature_names`) and, in `act`, how an observation becomes the network's
 input and the network's output an action; `open_platform` opens its simulator, `on_reset` reads what an
-episode's observation lacks (ManiSkill's goals). Torch is imported only when a checkpoint is opened.
+episode's observation lacks (ManiSkill's goals). `stream(seed)` is the T3 source protocol
+(`wsp_data.platforms.t3_sources`). Every platform's checkpoints are trained by `TRAIN_SCRIPT --platform NAME`.
+Torch is imported only when a checkpoint is opened.
 """
 
 from __future__ import annotations
 
 import hashlib
 import math
-import sys
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from wsp_data.platforms.t3_sources import SourceStream
+
 STAGES = ("early", "late")  # the checkpoint kept at 10 % of training, and the final one
 TRAINING_CONFIG = "training_config.json"  # the training record beside a platform's checkpoints
 SETTLE_STEPS = 5  # a policy rollout stops once success has held this many consecutive steps
 MAX_STEPS_FACTOR = 1.5  # a policy's default step budget: this × the expert's mean trajectory length
+TRAIN_SCRIPT = "scripts/train_bc_policies.py"  # trains every platform's checkpoints (`--platform NAME`)
+DOCS = "docs/guides/policies.md"  # the policies' recipes and measured success
 
 
 class PolicyCheckpointMissing(FileNotFoundError):
@@ -44,11 +49,6 @@ def sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
-def training_log(msg: str) -> None:
-    """The training scripts' progress line, on stderr."""
-    print(msg, file=sys.stderr, flush=True)
-
-
 def open_checkpoint(path: Path, rebuild: str, docs: str):
     """Load a policy checkpoint (model, metadata), or raise PolicyCheckpointMissing naming the path and the
     rebuild command."""
@@ -63,13 +63,11 @@ def open_checkpoint(path: Path, rebuild: str, docs: str):
 class BCPolicySource(ABC):
     """One behaviour-cloned checkpoint (task × stage), run closed-loop in a state-only simulator of its platform.
 
-    Class attributes: `PLATFORM` (the provenance's platform), `TASKS` (tasks with checkpoints),
-    `checkpoint_path` ((task, stage, directory) → path), `TRAIN_SCRIPT` and `DOCS` (named when one is missing)."""
+    Class attributes: `PLATFORM` (the provenance's platform, and `TRAIN_SCRIPT`'s `--platform`), `TASKS` (tasks
+    with checkpoints), `checkpoint_path` ((task, stage, directory) → path)."""
 
     PLATFORM: str
     TASKS: tuple[str, ...]
-    TRAIN_SCRIPT: str
-    DOCS: str
     checkpoint_path: Callable[..., Path]
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
@@ -79,7 +77,8 @@ class BCPolicySource(ABC):
             raise KeyError(f"unknown policy stage {stage!r}; stages: {', '.join(STAGES)}")
         self.task, self.stage = task, stage
         self.path = type(self).checkpoint_path(task, stage, checkpoint_dir)
-        self.model, self.meta = open_checkpoint(self.path, f"{self.TRAIN_SCRIPT} --tasks {task}", self.DOCS)
+        self.model, self.meta = open_checkpoint(
+            self.path, f"{TRAIN_SCRIPT} --platform {self.PLATFORM} --tasks {task}", DOCS)
         if self.meta["task"] != task or self.meta["stage"] != stage:
             raise ValueError(f"{self.path} holds {self.meta['task']}/{self.meta['stage']}, not {task}/{stage}")
         if self.meta["feature_names"] != self.feature_names():
@@ -153,6 +152,11 @@ class BCPolicySource(ABC):
                 break
         return np.stack(actions).astype(np.float32), bool(ob.success)
 
+    def stream(self, seed: int) -> SourceStream:
+        """The T3 source protocol: `trajectory(seed)`'s stream (success or not) and the provenance."""
+        actions, _ = self.trajectory(seed)
+        return SourceStream(actions, self.provenance)
+
     @property
     def provenance(self) -> dict:
         """What made this source's streams (stored as the T3 row's `source_provenance`)."""
@@ -168,7 +172,7 @@ class BCPolicySource(ABC):
 
 def closed_loop_success(source: BCPolicySource, seeds: list[int]) -> tuple[dict, list[np.ndarray]]:
     """A policy source's closed-loop success over `seeds` (each rollout from its own `reset(seed)`; the source
-    is closed after): the summary the training scripts record, and every rollout's action stream."""
+    is closed after): the summary the trainer (`TRAIN_SCRIPT`) records, and every rollout's action stream."""
     ok, streams = [], []
     try:
         for s in seeds:

@@ -6,6 +6,8 @@ hand_over (transfer_cube mirrored), two_arm_lift (its bar is laid out in a 6 × 
 and peg_insertion (its expert is a servo loop on the peg's measured axis, not a sequence of moves a style can
 stretch).
 
+Every source answers the T3 source protocol, `stream(seed)` (`wsp_data.platforms.t3_sources`).
+
 Operators (`AlohaOperatorSource`) are the task's expert script (`experts.SCRIPTS`) run with a documented style,
 every parameter in the provenance, recorded as the same 14-D joint-target stream:
 - H1 slow: every segment (move, hold, push) takes 2× its planned steps.
@@ -22,9 +24,9 @@ targets are clipped to the joint limits. Failures are kept (the T3 builder recor
 
 Policies (`AlohaPolicySource`): an MLP (`bc_model.MLPPolicy`) from simulator state to the 14-D
 joint-target action, trained by behaviour cloning on scripted-expert trajectories of training seeds plus
-noise-injected re-runs labelled with the script's clean action (`scripts/train_aloha_policies.py`); an early
-(200 of 20,000 steps: measured, the 10% checkpoint already solves 17–20 of 20 held-out scenes of every task) and a
-late (final) checkpoint per task in `wsp_data/platforms/aloha/checkpoints/`. Features: qpos (14:
+noise-injected re-runs labelled with the script's clean action (`scripts/train_bc_policies.py --platform aloha`);
+an early (200 of 20,000 steps: measured, the 10% checkpoint already solves 17–20 of 20 held-out scenes of every
+task) and a late (final) checkpoint per task in `wsp_data/platforms/aloha/checkpoints/`. Features: qpos (14:
 both arms' 6 joints, both finger slides), per grip point position (3) and rotation 6-D (6), per task object
 position (3), rotation 6-D (6) and position relative to each grip point (3 + 3), phase = step / the expert's mean
 length (1). Output: the 12 arm joint targets relative to the current arm joints (added back, each step's change
@@ -35,7 +37,7 @@ closed or 1 open at 0.5).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,11 +46,11 @@ from wsp_data.platforms.aloha import experts as ax
 from wsp_data.platforms.aloha.env import AlohaPlatform, aloha_task
 from wsp_data.platforms.aloha.experts import SCRIPTS, Hand, OutOfTime, Script
 from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
+from wsp_data.platforms.t3_sources import OperatorAttempt, ScriptedOperatorSource, operator_style
 
 T3_TASKS = ("transfer_cube", "lift_cube", "push_cube", "cube_in_bin", "stack_cubes")
 OPERATOR_STEP_BUDGET = 2.5  # × the expert's MAX_STEPS
 CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
-TRAIN_SCRIPT = "scripts/train_aloha_policies.py"
 MAX_DELTA = 0.3  # rad: bound on a policy's arm target relative to the current joint positions
 ARM_ACTION = (0, 1, 2, 3, 4, 5, 7, 8, 9, 10, 11, 12)  # native dims of the 12 arm joints (qpos columns 0–11)
 GRIP_ACTION = (6, 13)
@@ -128,21 +130,14 @@ class OperatorScript(Script):
         self._move(goal, n)
 
 
-@dataclass
-class OperatorAttempt:
-    actions: np.ndarray
-    success: bool
-
-
-class AlohaOperatorSource:
+class AlohaOperatorSource(ScriptedOperatorSource):
     """One scripted operator model (H1–H5) on one ALOHA task, on its own state-only platform."""
 
     def __init__(self, task: str, operator: str):
-        if operator not in OPERATORS:
-            raise KeyError(f"unknown operator {operator!r}; operators: {', '.join(OPERATORS)}")
+        style = operator_style(OPERATORS, operator)
         if task not in T3_TASKS:
             raise KeyError(f"no operator models for task {task!r}; T3 tasks: {', '.join(T3_TASKS)}")
-        self.task, self.operator, self.style = task, operator, OPERATORS[operator]
+        self.task, self.operator, self.style = task, operator, style
         self.spec = aloha_task(task)
         self.platform = AlohaPlatform(task, render=False, objects=self.spec.objects)
 
@@ -213,8 +208,6 @@ class AlohaPolicySource(BCPolicySource):
 
     PLATFORM = "aloha"
     TASKS = T3_TASKS
-    TRAIN_SCRIPT = TRAIN_SCRIPT
-    DOCS = "docs/guides/policies.md"
     checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):

@@ -1,5 +1,7 @@
 """T3's action sources on LIBERO: scripted operator models H1–H5 and behaviour-cloned policy checkpoints.
 
+Every source answers the T3 source protocol, `stream(seed)` (`wsp_data.platforms.t3_sources`).
+
 Operators (`LiberoOperatorSource`) are the expert's pick-and-place script (`PickPlaceScript`) run with a
 documented style, every parameter in the provenance:
 - H1 slow: servo gain ×0.35 and arm actions bounded to ±0.35 (the expert: ±0.9), gripper held 1.5× longer.
@@ -11,7 +13,7 @@ Failures are kept (the T3 builder records success).
 
 Policies (`LiberoPolicySource`): an MLP (`bc_model.MLPPolicy`) from simulator state to the 7-D OSC action,
 trained by behaviour cloning on scripted-expert trajectories of training seeds
-(`scripts/train_libero_policies.py`); an early (10%) and a late (final) checkpoint per task in
+(`scripts/train_bc_policies.py --platform libero`); an early (10%) and a late (final) checkpoint per task in
 `wsp_data/platforms/libero/checkpoints/`. Features: qpos (9), grip-site position (3) and rotation 6-D (6), per task
 object position (3), rotation 6-D (6) and position relative to the grip site (3), phase = step / the expert's
 mean length (1). Output: the 6 arm dimensions (bounded to ±0.9) and the gripper (snapped to ±1).
@@ -19,7 +21,6 @@ mean length (1). Output: the 6 arm dimensions (bounded to ±0.9) and the gripper
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
 from wsp_data.platforms.libero.env import GRIPPER_CLOSED, GRIPPER_OPEN, LiberoPlatform
 from wsp_data.platforms.libero import experts as lx
 from wsp_data.platforms.libero.experts import PickPlaceScript, task_spec
+from wsp_data.platforms.t3_sources import OperatorAttempt, ScriptedOperatorSource, operator_style
 
 T3_TASKS = (
     "libero_object/pick_up_the_alphabet_soup_and_place_it_in_the_basket",
@@ -90,19 +92,11 @@ class OperatorScript(PickPlaceScript):
         return [(beside + [0, 0, clear + self.style["cruise_extra"]], 0.006, 100), (beside + [0, 0, 0.03], 0.004, 60)]
 
 
-@dataclass
-class OperatorAttempt:
-    actions: np.ndarray
-    success: bool
-
-
-class LiberoOperatorSource:
+class LiberoOperatorSource(ScriptedOperatorSource):
     """One scripted operator model (H1–H5) on one LIBERO task, on its own state-only env."""
 
     def __init__(self, task: str, operator: str):
-        if operator not in OPERATORS:
-            raise KeyError(f"unknown operator {operator!r}; operators: {', '.join(OPERATORS)}")
-        self.task, self.operator, self.style = task, operator, OPERATORS[operator]
+        self.task, self.operator, self.style = task, operator, operator_style(OPERATORS, operator)
         self.spec = task_spec(task)
         self.platform = LiberoPlatform(task, render=False, objects=self.spec.objects)
 
@@ -151,8 +145,6 @@ class LiberoPolicySource(BCPolicySource):
 
     PLATFORM = "libero"
     TASKS = T3_TASKS
-    TRAIN_SCRIPT = "scripts/train_libero_policies.py"
-    DOCS = "docs/guides/policies.md"
     checkpoint_path = staticmethod(checkpoint_path)
 
     def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):

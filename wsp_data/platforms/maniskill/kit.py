@@ -50,16 +50,16 @@ class ManiSkillKit(PlatformKit):
 
     # -- T3 -----------------------------------------------------------------------------------------------
     def t3_tasks(self) -> tuple[str, ...]:
-        from wsp_data.platforms.maniskill.policies import T3_TASKS
+        from wsp_data.platforms.maniskill.t3 import T3_TASKS
 
         return T3_TASKS
 
     def t3_source(self, task: str, group: str):
         if group.startswith("policy_"):
-            from wsp_data.platforms.maniskill.policies import PolicySource
+            from wsp_data.platforms.maniskill.t3 import PolicySource
 
             return PolicySource(task, group.removeprefix("policy_"))
-        from wsp_data.platforms.maniskill.operators import OperatorSource
+        from wsp_data.platforms.maniskill.t3 import OperatorSource
 
         return OperatorSource(task, group)
 

@@ -22,7 +22,8 @@ STEP_M = 0.012  # TCP translation per control step (0.24 m/s at 20 Hz)
 STEP_RAD = 0.08  # TCP rotation per control step
 
 
-def _slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
+def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
+    """The unit quaternion (wxyz) a fraction `t` of the way from `q0` to `q1` along the shorter arc."""
     d = float(np.dot(q0, q1))
     if d < 0:
         q1, d = -q1, -d
@@ -33,7 +34,8 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
     return (math.sin((1 - t) * th) * q0 + math.sin(t * th) * q1) / math.sin(th)
 
 
-def _angle(q0: np.ndarray, q1: np.ndarray) -> float:
+def angle_between(q0: np.ndarray, q1: np.ndarray) -> float:
+    """The rotation angle (rad) between two unit quaternions."""
     return 2 * math.acos(min(1.0, abs(float(np.dot(q0, q1)))))
 
 
@@ -79,10 +81,10 @@ class SkillScript:
         """Straight-line TCP motion (slerp for rotation) from the last commanded pose to `target`."""
         start = self._target
         n = max(3, math.ceil(max(np.linalg.norm(target.p - start.p) / (STEP_M * speed),
-                                 _angle(start.q, target.q) / (STEP_RAD * speed))))
+                                 angle_between(start.q, target.q) / (STEP_RAD * speed))))
         for i in range(1, n + 1):
             t = i / n
-            self._command(sapien.Pose(start.p + t * (target.p - start.p), _slerp(start.q, target.q, t)))
+            self._command(sapien.Pose(start.p + t * (target.p - start.p), slerp(start.q, target.q, t)))
         self.hold(settle)
 
     def hold(self, steps: int) -> None:

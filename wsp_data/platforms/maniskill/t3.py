@@ -1,7 +1,8 @@
-"""Scripted operator models H1–H5 for T3 (spec §3.3: action-source behaviour preservation).
+"""T3's action sources on ManiSkill (spec §3.3): scripted operator models H1–H5 and behaviour-cloned policy
+checkpoints.
 
-A release must be buildable with nobody at the keyboard, so the five T3 "operators" are scripted models that
-imitate the expert: each runs the task's own expert solver (`experts.TASKS[task].solve`), but on an
+Operators. A release must be buildable with nobody at the keyboard, so the five T3 "operators" are scripted
+models that imitate the expert: each runs the task's own expert solver (`experts.TASKS[task].solve`), but on an
 `OperatorScript`, a `SkillScript` whose motions carry a style. The strategy (what to grasp, where to put it)
 is the expert's; the execution (speed, settling, smoothness, pauses, corrections, approach path) is the
 operator's. Every style is a frozen `OperatorStyle`, so provenance records each parameter.
@@ -25,14 +26,32 @@ Randomness (H3 jitter and step sizes, H4's pauses and miss directions) comes fro
 (task, operator, scene seed): the same triple always gives the same stream.
 
 `OperatorSource(task, operator).attempt(seed)` scripts a seed, replays the recorded 8-D `pd_joint_pos`
-stream in a fresh `pd_joint_pos` env and returns the stream and whether the replay ended in task success:
-T3 keeps failures too, so the caller decides. `trajectory(seed)` is the `ExpertSource`-compatible form
-(the stream only when it succeeds, else None).
+stream in a fresh `pd_joint_pos` env and returns the stream and whether the replay ended in task success
+(an `OperatorAttempt`): T3 keeps failures too (`stream(seed)`, the T3 source protocol of
+`wsp_data.platforms.t3_sources`), so the caller decides. `trajectory(seed)` is the `ExpertSource`-compatible
+form (the stream only when it succeeds, else None).
 
-    python -m wsp_data.platforms.maniskill.operators --seeds 10 [--tasks …] [--operators …]
+    python -m wsp_data.platforms.maniskill.t3 --seeds 10 [--tasks …] [--operators …]
 
 measures success and the style measures of `stream_metrics` per task × operator (and the expert, whose
 neutral `EXPERT_STYLE` reproduces `ExpertSource`'s stream bit for bit) as Markdown tables.
+
+Policies. For each T3 task a small MLP was trained (`scripts/train_bc_policies.py --platform maniskill`, CPU,
+fixed seeds) on replay-verified scripted expert trajectories of training seeds (`ExpertSource`) plus
+noise-injected re-executions of them, and two checkpoints were kept: an *early* one (10% of training) and the
+*late* (final) one; docs/guides/policies.md has their measured success. `PolicySource(task, stage)` loads
+`wsp_data/platforms/maniskill/checkpoints/<task>_<stage>.pt` and runs the policy closed-loop in its own
+state-only `ManiSkillPlatform`; the returned stream is a plain `pd_joint_pos` stream that
+`ManiSkillPlatform.replay` reproduces state for state (every episode starts from a rebuilt scene, and CPU
+PhysX is deterministic).
+
+State features (`features`), all from the platform's `Observation` plus the episode's goal and the step:
+  qpos (9) · TCP position (3) · TCP rotation as the first two columns of its matrix (6) · per task object:
+  position (3), rotation 6-D (6), position relative to the TCP (3) · for tasks with a goal that the
+  observation does not hold (PickCube's goal site, Push/PullCube's goal region): goal position (3) and goal
+  relative to the first object (3) · phase = step / the expert's mean length (1).
+Target: arm joint targets relative to the current arm qpos (7) and the gripper command (1); at run time the
+arm part is added back to qpos and clipped to the joint limits, and the gripper is snapped to ±1.
 """
 
 from __future__ import annotations
@@ -44,17 +63,24 @@ import time
 import zlib
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
 import sapien
 
+from wsp_data.platforms.bc_policy import BCPolicySource, rot6d
 from wsp_data.platforms.maniskill.env import GRIPPER_CLOSED, ManiSkillPlatform
 from wsp_data.platforms.maniskill.experts import task_spec
-from wsp_data.platforms.maniskill.skills import STEP_M, STEP_RAD, SkillScript, _angle, _slerp
+from wsp_data.platforms.maniskill.skills import STEP_M, STEP_RAD, SkillScript, angle_between, slerp
+from wsp_data.platforms.t3_sources import OperatorAttempt, ScriptedOperatorSource, operator_style
 
 T3_TASKS = ("PickCube", "PushCube", "PullCube", "PlaceSphere", "LiftPegUpright")
 CONTROL_HZ = 20  # ManiSkill's control frequency for these tasks
 LONG_MOVE_M = 0.08  # horizontal travel from which a motion counts as a carry (H4 overshoot, H5 arc)
+CHECKPOINT_DIR = Path(__file__).resolve().parent / "checkpoints"
+
+# The goal the observation does not carry: task → env attribute holding a (static) goal actor.
+GOAL_ATTR = {"PickCube": "goal_site", "PushCube": "goal_region", "PullCube": "goal_region"}
 
 
 @dataclass(frozen=True)
@@ -173,7 +199,7 @@ class OperatorScript(SkillScript):
         st, start = self.style, self._target
         v = speed * st.speed
         n = max(3, math.ceil(max(np.linalg.norm(target.p - start.p) / (STEP_M * v),
-                                 _angle(start.q, target.q) / (STEP_RAD * v))))
+                                 angle_between(start.q, target.q) / (STEP_RAD * v))))
         if st.speed_unevenness > 0:
             w = 1.0 + st.speed_unevenness * self.rng.uniform(-1.0, 1.0, n)
             ts = np.cumsum(w) / w.sum()
@@ -188,7 +214,7 @@ class OperatorScript(SkillScript):
             p = start.p + t * (target.p - start.p)
             if i < n and jitter > 0:
                 p = p + np.clip(self.rng.normal(0.0, jitter, 3), -2 * jitter, 2 * jitter)
-            self._command(sapien.Pose(p, _slerp(start.q, target.q, t)))
+            self._command(sapien.Pose(p, slerp(start.q, target.q, t)))
             if i == pause_at:
                 self._raw_hold(st.hesitation_steps)
 
@@ -198,7 +224,7 @@ class OperatorScript(SkillScript):
         d = (target.p - start.p) * [1, 1, 0]
         carry = not self._stroke and float(np.linalg.norm(d)) > LONG_MOVE_M
         if carry and st.detour_m > 0:  # arc over the straight line through a raised midpoint
-            mid = sapien.Pose((start.p + target.p) / 2 + [0, 0, st.detour_m], _slerp(start.q, target.q, 0.5))
+            mid = sapien.Pose((start.p + target.p) / 2 + [0, 0, st.detour_m], slerp(start.q, target.q, 0.5))
             self._path(mid, speed)
         if carry and st.overshoot_m > 0:  # overshoot, stop, come back
             self._path(sapien.Pose(target.p + st.overshoot_m * _horizontal(d), target.q), speed)
@@ -278,25 +304,13 @@ class OperatorScript(SkillScript):
             self._stroke = False
 
 
-# -- the source ----------------------------------------------------------------------------------
-@dataclass
-class OperatorAttempt:
-    """One scripted operator run: its recorded stream (None if the script itself failed) and the verdict of
-    the `pd_joint_pos` replay."""
-
-    actions: np.ndarray | None
-    success: bool
-    error: str | None = None
-
-
-class OperatorSource:
+# -- the operator source -------------------------------------------------------------------------
+class OperatorSource(ScriptedOperatorSource):
     """Scripted operator trajectories for one task, replayed and judged under `pd_joint_pos`."""
 
     def __init__(self, task: str, operator: str):
-        if operator not in OPERATORS and operator != EXPERT_STYLE.name:
-            raise KeyError(f"unknown operator {operator!r}; known: {', '.join(OPERATORS)}")
+        self.style = EXPERT_STYLE if operator == EXPERT_STYLE.name else operator_style(OPERATORS, operator)
         self.spec = task_spec(task)
-        self.style = OPERATORS.get(operator, EXPERT_STYLE)
         self.script = OperatorScript(self.spec.name, self.spec.objects, self.style)
         self.replayer = ManiSkillPlatform(self.spec.name, render=False, objects=self.spec.objects)
 
@@ -332,7 +346,97 @@ class OperatorSource:
         return run.actions if run.success else None
 
 
-# -- measurement ---------------------------------------------------------------------------------
+# -- policies: checkpoints and state features -----------------------------------------------------
+def checkpoint_path(task: str, stage: str, directory: Path | str | None = None) -> Path:
+    return Path(directory or CHECKPOINT_DIR) / f"{task}_{stage}.pt"
+
+
+def num_objects(task: str) -> int:
+    return len(task_spec(task).objects)
+
+
+def feature_names(task: str) -> list[str]:
+    names = [f"qpos{i}" for i in range(9)] + ["tcp_x", "tcp_y", "tcp_z"] + [f"tcp_r{i}" for i in range(6)]
+    for k in range(num_objects(task)):
+        names += [f"obj{k}_{a}" for a in "xyz"] + [f"obj{k}_r{i}" for i in range(6)]
+        names += [f"obj{k}_rel_tcp_{a}" for a in "xyz"]
+    if task in GOAL_ATTR:
+        names += [f"goal_{a}" for a in "xyz"] + [f"goal_rel_obj0_{a}" for a in "xyz"]
+    return names + ["phase"]
+
+
+def features(task: str, observation, step: int, goal: np.ndarray | None, ref_length: float) -> np.ndarray:
+    """The policy input of one observation (see the module docstring); NaN-padded object slots are dropped."""
+    tcp = np.asarray(observation.tcp_pose, dtype=np.float64)
+    parts = [np.asarray(observation.qpos, dtype=np.float64)[:9], tcp[:3], rot6d(tcp[3:7])]
+    poses = np.nan_to_num(np.asarray(observation.object_poses, dtype=np.float64))
+    for k in range(num_objects(task)):
+        p = poses[k]
+        q = p[3:7] if np.any(p[3:7]) else np.array([1.0, 0, 0, 0])
+        parts += [p[:3], rot6d(q), p[:3] - tcp[:3]]
+    if task in GOAL_ATTR:
+        if goal is None:
+            raise ValueError(f"{task} policies need the episode's goal position")
+        g = np.asarray(goal, dtype=np.float64).reshape(3)
+        parts += [g, g - poses[0, :3]]
+    parts.append(np.array([step / ref_length]))
+    return np.concatenate(parts).astype(np.float32)
+
+
+def action_target(observation, action: np.ndarray) -> np.ndarray:
+    """The regression target of an expert action: arm targets relative to the arm qpos, gripper as is."""
+    a = np.asarray(action, dtype=np.float64)
+    return np.concatenate([a[:7] - np.asarray(observation.qpos, dtype=np.float64)[:7], a[7:8]]).astype(np.float32)
+
+
+def read_goal(platform, task: str) -> np.ndarray | None:
+    """The episode's goal position (world xyz) from the platform's env, for tasks whose goal the observation
+    does not hold; None for the others."""
+    attr = GOAL_ATTR.get(task)
+    if attr is None:
+        return None
+    return getattr(platform.u, attr).pose.p[0].detach().cpu().numpy().astype(np.float32)
+
+
+# -- the policy source ---------------------------------------------------------------------------
+class PolicySource(BCPolicySource):
+    """One checkpoint (task × stage) of a behaviour-cloned policy, run closed-loop in a state-only ManiSkill env;
+    actions are `pd_joint_pos` (8,): arm targets = qpos + the network's deltas, clipped to the joint limits,
+    and the gripper snapped to ±1."""
+
+    PLATFORM = "maniskill"
+    TASKS = T3_TASKS
+    checkpoint_path = staticmethod(checkpoint_path)
+
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
+        super().__init__(task, stage, checkpoint_dir)
+        self._limits = np.asarray(self.meta["arm_limits"], dtype=np.float64)  # (7, 2) rad
+        self.goal: np.ndarray | None = None  # the goal of the current episode of the own platform
+
+    def feature_names(self) -> list[str]:
+        return feature_names(self.task)
+
+    def open_platform(self) -> ManiSkillPlatform:
+        return ManiSkillPlatform(self.task, render=False, objects=task_spec(self.task).objects)
+
+    def on_reset(self, observation) -> None:
+        self.goal = read_goal(self.platform, self.task)
+
+    def act(self, observation, step: int = 0, goal: np.ndarray | None = None) -> np.ndarray:
+        """The deterministic (8,) float32 `pd_joint_pos` action for an observation at `step` of an episode.
+        `goal` (PickCube, PushCube, PullCube) defaults to the goal of the own platform's current episode."""
+        if goal is None and self.task in GOAL_ATTR:
+            if self.goal is None:
+                raise ValueError(f"{self.task} needs a goal: pass goal= or run trajectory() first")
+            goal = self.goal
+        y = self.network(features(self.task, observation, step, goal, self.ref_length))
+        arm = np.asarray(observation.qpos, dtype=np.float64)[:7] + y[:7]
+        arm = np.clip(arm, self._limits[:, 0], self._limits[:, 1])
+        grip = 1.0 if y[7] >= 0 else -1.0
+        return np.array([*arm, grip], dtype=np.float32)
+
+
+# -- operator measurement ------------------------------------------------------------------------
 def stream_metrics(actions: np.ndarray, platform: ManiSkillPlatform | None = None) -> dict:
     """Style measures of one (T, 8) stream, on the 7 arm joint targets:
     - `length`: steps;
