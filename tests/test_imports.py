@@ -19,14 +19,9 @@ SCRIPT_FOLDERS = ("scripts", "benchmarks")  # folders of scripts: file x.py is m
 ROOTS = PACKAGES + SCRIPT_FOLDERS
 FORBIDDEN = ("wsp_data", "torch", "sapien", "mani_skill", "mujoco", "lerobot")
 
-# Private names other modules still import, one entry per (importing module, name as imported). Only files another
-# person is reworking may appear here (T3 sources, operators, policies, the behaviour-cloning model and policy, the
-# training scripts); remove an entry when its import goes.
-PRIVATE_IMPORTS_ALLOWED = {
-    # the ManiSkill operator models interpolate with the skills' own angle and rotation helpers
-    ("wsp_data.platforms.maniskill.operators", "wsp_data.platforms.maniskill.skills._angle"),
-    ("wsp_data.platforms.maniskill.operators", "wsp_data.platforms.maniskill.skills._slerp"),
-}
+# Private names other modules may import, one entry per (importing module, name as imported); none today. An entry
+# must be in use: the test fails on a stale one.
+PRIVATE_IMPORTS_ALLOWED: set[tuple[str, str]] = set()
 
 
 def test_evaluation_side_imports_no_build_side_simulator_or_torch():

@@ -269,12 +269,12 @@ class PlatformKit(ABC):
         """The T3 action source of `group` on `task`.
 
         Args:
-            group: "H1" … "H5" (scripted operator models: `.attempt(seed).actions`, kept whether they
-                succeed or fail, None when no stream) or "policy_early" / "policy_late" (behaviour-cloning
-                checkpoints: `.trajectory(seed) -> (actions, success)`).
+            group: "H1" … "H5" (scripted operator models, whose streams are kept whether they succeed or fail)
+                or "policy_early" / "policy_late" (behaviour-cloning checkpoints).
         Returns:
-            a source with `.provenance` (a JSON-able dict, stored as `source_provenance`; its "kind" is
-            `scripted_operator` or `bc_policy`) and `.close()`.
+            a `wsp_data.platforms.t3_sources.T3Source`: `.stream(seed) -> SourceStream` (the actions, None when
+            the source gives no stream, and the provenance: a JSON-able dict stored as `source_provenance`, whose
+            "kind" is `scripted_operator` or `bc_policy`) and `.close()`.
         Called:
             once per (task, group) per build worker, on first use.
         """
