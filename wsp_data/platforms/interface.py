@@ -44,6 +44,7 @@ from wsp_data.schema import PlatformInfo
 
 if TYPE_CHECKING:  # the contract imports this module: its types are named here for annotations only
     from wsp_data.platforms.contract import ExpertSource, Replayer, T4Rig, T5Rig, TaskSpec
+    from wsp_data.platforms.t3_sources import T3Source
 
 ARM = 7  # arm joints
 BLOCK_RAD = 0.15  # rad an arm joint may lag its target …
@@ -265,7 +266,7 @@ class PlatformKit(ABC):
         """
         raise NotSupported(self.unsupported("t3"))
 
-    def t3_source(self, task: str, group: str):
+    def t3_source(self, task: str, group: str) -> T3Source:
         """The T3 action source of `group` on `task`.
 
         Args:
