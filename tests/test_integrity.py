@@ -165,6 +165,7 @@ def test_a_second_scoring_into_one_folder_refuses_and_a_killed_holders_lock_is_t
     assert (out / LOCK_NAME).exists()  # the killed holder's file is left behind: its lock is not
     again = score_submission(sub, release, out, progress=False)
     assert again["platforms"] == report["platforms"]
+    assert not (out / LOCK_NAME).exists() and not (sub / LOCK_NAME).exists()  # a finished run leaves no lock file
 
 
 def test_two_concurrent_scorings_one_refuses(pristine, tmp_path):
