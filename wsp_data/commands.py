@@ -1,6 +1,6 @@
 """The build side's `wsp` commands: `build`, `sources` and `teleop`.
 
-Each is a `wsp_eval.cli.Command` that `wsp` finds through the `worldsimprobe.commands` entry-point group
+Each is a `wsp_eval.command.Command` that `wsp` finds through the `worldsimprobe.commands` entry-point group
 (pyproject.toml) and loads only when it is asked for; what a command runs (builders, simulators) is imported when
 it runs, so in the scoring-only install it stops with one line naming the extra to install.
 """
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from wsp_data.platforms import KITS
 from wsp_data.schema import DEFAULT_RELEASE_NAME, PRIVATE_RANGE, SEED_BASE, SUITES
-from wsp_eval.cli import CliError, Command, positive
+from wsp_eval.command import CliError, Command, positive
 
 
 def shard(text: str) -> tuple[int, int]:

@@ -29,27 +29,12 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 from wsp_eval import console
+from wsp_eval.command import CliError, Command, positive
 from wsp_eval.registry import PluginError, Registry
 from wsp_eval.release_format import DEFAULT_RELEASE_NAME, ReleaseError, load_release
-
-
-class CliError(Exception):
-    """A command that cannot go on; `main` prints the message on one line and exits 2."""
-
-
-@dataclass(frozen=True)
-class Command:
-    """A `wsp` sub-command from another module: its one-line help, what adds its arguments to its parser, and
-    what runs it (returning the exit code; CliError for an error the user can fix)."""
-
-    help: str
-    add_arguments: Callable[[argparse.ArgumentParser], None]
-    run: Callable[[argparse.Namespace], int]
 
 
 COMMANDS: Registry[Command] = Registry("command", "worldsimprobe.commands")
@@ -60,17 +45,6 @@ COMMANDS: Registry[Command] = Registry("command", "worldsimprobe.commands")
 BUILD_MODULES = frozenset({"sapien", "mani_skill", "mujoco", "robosuite", "libero", "lerobot", "datasets", "torch",
                            "huggingface_hub", "gymnasium", "OpenGL", "numba", "easydict", "filelock"})
 EXTRA_OF_MODULE = {**dict.fromkeys(BUILD_MODULES, "build"), "ray": "cluster"}
-
-
-def positive(text: str) -> int:
-    """An argparse type: a whole number above 0."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"must be positive, got {v}")
-    return v
 
 
 def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:

@@ -201,7 +201,7 @@ def named_configs(submission: Path, release: Path) -> list[str]:
     path = Path(submission) / SUBMISSION_JSON
     try:
         named = json.loads(path.read_text()).get("configs") if path.stat().st_size <= MAX_MANIFEST_BYTES else None
-    except (OSError, ValueError, AttributeError):
+    except (OSError, ValueError, AttributeError, RecursionError):
         named = None
     if isinstance(named, list) and named and all(isinstance(c, str) for c in named):
         return named
