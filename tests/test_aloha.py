@@ -317,7 +317,7 @@ def test_t3_group_shares_its_scene_and_keeps_every_source(aloha_release, qlimits
 
     from wsp_data.builders.t3 import SOURCE_GROUPS
     from wsp_data.platforms.aloha.t3 import OPERATORS, T3_TASKS, checkpoint_path
-    from wsp_data.platforms.bc_policy import sha256
+    from wsp_eval.integrity import sha256
 
     ds = open_lerobot(aloha_release, "t3_aloha")
     rows = instance_rows(aloha_release, "t3_aloha")

@@ -9,7 +9,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from wsp_data.release import sha256
+from wsp_eval.integrity import sha256
 from wsp_eval.release_info import describe
 from wsp_data.schema import EPISODE_COLUMNS, INSTANCES, OBJECT_POSES_KEY, RELEASE_JSON
 from wsp_eval.reference import reference_masks

@@ -7,7 +7,6 @@ A folder is a WorldSimProbe release when it holds `release.json` (`wsp info` sum
 
 from __future__ import annotations
 
-import hashlib
 from collections import Counter
 import json
 import subprocess
@@ -22,6 +21,7 @@ from wsp_data.schema import (
     CARD, CODEBASE_VERSION, CROISSANT, INSTANCES, LOG_DIR, MAX_OBJECTS, PRIVATE_BASE, PRIVATE_PRIME, PRIVATE_RANGE,
     RELEASE_JSON, SEED_BASE, SEED_SPAN, STAGING_DIR,
 )
+from wsp_eval.integrity import sha256
 from wsp_eval.release_format import BENCHMARK_VERSION, ReleaseError, load_release
 
 CARDS_DIR = Path(__file__).resolve().parent.parent / "cards"
@@ -38,14 +38,6 @@ def code_version() -> str:
         return f"worldsimprobe {wsp_data.__version__} ({commit}{'-dirty' if dirty else ''})"
     except (OSError, subprocess.SubprocessError):
         return f"worldsimprobe {wsp_data.__version__}"
-
-
-def sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def write_release(root: Path, suites: dict) -> dict:

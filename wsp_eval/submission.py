@@ -191,8 +191,10 @@ def _check_videos(sub: Path, todo: list[Expected]) -> list[Problem]:
 def release_problems(release: Path, configs: list[str]) -> list[Problem]:
     """The files of `configs` that differ from the release's `release.json` (`wsp_eval.integrity`), as fatal
     problems naming each file, the hashes and the fix."""
-    return [Problem(str(Path(release) / p.path), f"{p.reason}; {repair(release, p.path.split('/', 1)[0])}", fatal=True)
-            for p in check_release(release, configs)[1]]
+    found = check_release(release, configs)[1]
+    fixes = {c: repair(release, c) for c in {p.path.split("/", 1)[0] for p in found}}
+    return [Problem(str(Path(release) / p.path), f"{p.reason}; {fixes[p.path.split('/', 1)[0]]}", fatal=True)
+            for p in found]
 
 
 def named_configs(submission: Path, release: Path) -> list[str]:

@@ -12,7 +12,6 @@ Torch is imported only when a checkpoint is opened.
 
 from __future__ import annotations
 
-import hashlib
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -21,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wsp_data.platforms.t3_sources import SourceStream
+from wsp_eval.integrity import sha256
 
 STAGES = ("early", "late")  # the checkpoint kept at 10 % of training, and the final one
 TRAINING_CONFIG = "training_config.json"  # the training record beside a platform's checkpoints
@@ -43,10 +43,6 @@ def rot6d(q) -> np.ndarray:
         1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y),  # column 0
         2 * (x * y - w * z), 1 - 2 * (x * x + z * z), 2 * (y * z + w * x),  # column 1
     ], dtype=np.float64)
-
-
-def sha256(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def open_checkpoint(path: Path, rebuild: str, docs: str):
