@@ -21,7 +21,7 @@ import pytest
 from wsp_eval import backends as registry
 from wsp_eval.backends import BackendSpec
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.object_track import X_FULL, X_ZERO, fidelity, object_track, positions, relative_error
+from wsp_eval.object_track import X_FULL, X_ZERO, ObjectPose, fidelity, object_track, positions, relative_error
 from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
 from wsp_eval.score import ScoreError, score_submission
 from wsp_eval.studies import t5_negatives
@@ -117,13 +117,68 @@ def test_the_error_of_a_translated_object_is_exact():
         return frames, labels
 
     ref, labels = video(1.0)
-    track = object_track(ref, labels, 1, np.zeros_like(labels))
+    centres = np.array([[10 + t + 3.5, 23.5] for t in range(n)])  # the square's true centre (its projected pose)
+    track = object_track(ref, labels, 1, np.zeros_like(labels), _pose(centres))
     assert track.scorable
     exact = relative_error(positions(ref, track, np.arange(n)))
     assert exact < 0.01 and fidelity(exact) == 100.0
     half = relative_error(positions(video(0.5)[0], track, np.arange(n)))
     assert half == pytest.approx(0.5, abs=0.06) and fidelity(half) < 100.0
     assert fidelity(X_ZERO) == 0.0 and fidelity(X_FULL) == 100.0
+
+
+def _pose(centres: np.ndarray) -> ObjectPose:
+    """A camera looking straight down the z axis with unit focal length, and an unturned object whose image centre
+    is at `centres` (T, 2) px: its world position is (x, y, 1)."""
+    poses = np.c_[centres, np.ones(len(centres)), np.ones(len(centres)), np.zeros((len(centres), 3))]
+    return ObjectPose(poses, np.eye(3), np.c_[np.eye(3), np.zeros(3)])
+
+
+def _square_clip(xs: list[float], hidden: set[int], cover: list[int] | None = None, size: int = 64):
+    """A textured 8×8 square at x = xs[t] on a flat background; frames in `hidden` have it wholly under the
+    robot, and `cover[t]` robot columns cover its left part. Returns frames, object labels, robot labels and
+    the square's true centre per frame."""
+    rng = np.random.default_rng(1)
+    patch = rng.integers(0, 255, (8, 8, 3), dtype=np.uint8)
+    n = len(xs)
+    frames = np.full((n, size, size, 3), 120, np.uint8)
+    labels = np.zeros((n, size, size), np.uint8)
+    robot = np.zeros((n, size, size), np.uint8)
+    for t, x in enumerate(xs):
+        x = int(round(x))
+        frames[t, 20:28, x:x + 8] = patch
+        labels[t, 20:28, x:x + 8] = 1
+        covered = 8 if t in hidden else (cover[t] if cover else 0)
+        if covered:
+            frames[t, 18:30, x - 2:x + covered] = 40
+            robot[t, 18:30, x - 2:x + covered] = 1
+    centres = np.array([[int(round(x)) + 3.5, 23.5] for x in xs])
+    return frames, labels, robot, centres
+
+
+def test_a_hand_covering_a_resting_object_is_no_object_motion():
+    """The visible pixels' centroid of a still square travels 3 px as a hand covers its left part; its projected
+    position does not move, so the reference is not scorable (a frozen video would reproduce that travel)."""
+    n = 24
+    cover = [min(t // 3, 6) for t in range(n)]
+    frames, labels, robot, centres = _square_clip([20.0] * n, set(), cover)
+    visible = (labels == 1) & (robot == 0)
+    centroid_x = [np.nonzero(v)[1].mean() for v in visible]
+    assert max(centroid_x) - min(centroid_x) >= 2.0  # what the visible centroid would call travel
+    assert not object_track(frames, labels, 1, robot, _pose(centres)).scorable
+
+
+def test_motion_made_out_of_sight_is_not_scorable():
+    """A square that moves 12 px only while wholly hidden: seen before and after, its path is unseen (a jump and a
+    glide look alike), so the reference is not scorable; the same motion in sight is."""
+    n = 24
+    xs = [10.0] * 8 + [10.0 + 1.5 * (t - 7) for t in range(8, 16)] + [22.0] * 8
+    frames, labels, robot, centres = _square_clip(xs, set(range(8, 16)))
+    track = object_track(frames, labels, 1, robot, _pose(centres))
+    assert track.seen_motion() < 0.2 and not track.scorable
+    frames, labels, robot, centres = _square_clip(xs, set())
+    seen = object_track(frames, labels, 1, robot, _pose(centres))
+    assert seen.seen_motion() == pytest.approx(1.0) and seen.scorable
 
 
 def test_an_older_release_format_is_refused_with_the_command_that_rebuilds_it(suites_release, tmp_path):

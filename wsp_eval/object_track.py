@@ -5,11 +5,13 @@ For one reference and a generated video over their common duration, at every ref
 frame nearest in time, spec §4.1):
 1. The reference's object at frame t: its exact visible pixels (the release's `object_mask` label of the evaluated
    object, less the robot's pixels) and their colours in the reference frame smoothed by `SMOOTH`: a masked
-   template, whose centroid p*_t is where the reference shows the object. A frame where fewer than `MIN_PIXELS`
-   (per 128² px) of the object are visible carries no position and is skipped.
-2. The generated video's object at frame t: the position p̂_t where that template best matches the generated frame
-   (smoothed alike; masked sum of squared differences, sub-pixel by a parabola through the minimum and its
-   neighbours) inside the search region: the box of the reference's templates grown by `MARGIN` template sizes.
+   template. Where the object is, p*_t, is its simulator position projected through the release's camera (not the
+   visible pixels' centroid, which a hand covering part of a resting object moves). A frame where fewer than
+   `MIN_PIXELS` (per 128² px) of the object are visible carries no position and is skipped.
+2. The generated video's object at frame t: where that template best matches the generated frame (smoothed alike;
+   masked sum of squared differences, sub-pixel by a parabola through the minimum and its neighbours) inside the
+   search region, the box of the reference's templates grown by `MARGIN` template sizes; p̂_t is that match's
+   place of the projected position (the template's centroid moved by the reference's offset p*_t − centroid_t).
    A video without the object there matches it somewhere else in the region, or at the place it stayed.
 3. Relative errors, against the reference's own motion, over the used frames (p_0: the first used frame):
    - an object whose image travels at least `MIN_TRAVEL` (per 128 px of frame height): x = max(x_d, x_v), with the
@@ -24,8 +26,11 @@ frame nearest in time, spec §4.1):
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
-4. A reference is scorable when its object travels or turns so (`ObjectTrack.scorable`): the T5 builder drops the
-   others, as RMFA's suites drop a reference without a scorable window.
+4. A reference is scorable when its object travels or turns so where it can be seen (`ObjectTrack.scorable`): it
+   travels at least `MIN_TRAVEL` between frames that carry a position, and at least `SEEN_MOTION` of its image
+   path (the projected position's, over every frame) lies between consecutive frames that both carry one; motion
+   made while the object is hidden cannot be told from a jump. The T5 builder drops the others, as RMFA's suites
+   drop a reference without a scorable window.
 
 The constants were chosen on training-range builds (ManiSkill and LIBERO, `--seed-range train`) against the
 generated-video negatives of `wsp study t5-negatives`; docs/validity.md reports them on sets built afterwards.
@@ -43,6 +48,7 @@ SMOOTH = 3.0  # px per 128 px of frame height: both videos are Gaussian-smoothed
 #   slightly blurred rendering matches the reference's sharp template
 MARGIN = 2.0  # the search region: the reference templates' box grown by this many template sizes
 MIN_TRAVEL = 2.0  # px per 128 px of frame height: the reference object's image must move this far to be scorable
+SEEN_MOTION = 0.5  # share of the object's image path that must lie between frames in which it is seen
 LAG = 4  # frames (0.2 s at 20 Hz): the velocity error's step
 ANGLES = np.deg2rad(np.arange(-45.0, 45.1, 3.0))  # in-plane rotations tried (a box's image repeats every 90°)
 ROT_VISIBLE = 0.2  # rad: a reference whose object turns at least this far in the image is scored on rotation too
@@ -53,12 +59,13 @@ X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response
 
 class Template(NamedTuple):
     """The reference object at one sample: its bounding box origin (x, y), colours (h, w, 3) float32, mask (h, w)
-    uint8, and its centroid p* (x, y) in the frame."""
+    uint8, its visible pixels' centroid (x, y) in the frame, and its projected position p* (x, y)."""
 
     origin: tuple[int, int]
     pixels: np.ndarray
     mask: np.ndarray
     centre: np.ndarray
+    anchor: np.ndarray
 
 
 class ObjectTrack(NamedTuple):
@@ -69,40 +76,102 @@ class ObjectTrack(NamedTuple):
     region: tuple[int, int, int, int]  # (x0, y0, x1, y1): where the generated video's object is looked for
     turns: list[Template]  # the first used template turned by each of ANGLES
     angles: np.ndarray  # θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)
+    points: np.ndarray  # (T, 2): the object's projected position in every frame, seen or not
+    true_turn: np.ndarray  # (T,): its simulator rotation about the camera's axis since frame 0, seen or not (rad)
 
     @property
     def used(self) -> list[int]:
         return [k for k, t in enumerate(self.templates) if t is not None]
 
     def travel(self) -> np.ndarray:
-        """d_t of every used sample (px)."""
+        """d_t of every used sample: the projected position's distance from the first used sample's (px)."""
         used = self.used
         if not used:
             return np.zeros(0)
-        start = self.templates[used[0]].centre
-        return np.array([np.linalg.norm(self.templates[k].centre - start) for k in used])
+        return np.linalg.norm(self.points[used] - self.points[used[0]], axis=1)
+
+    def seen_motion(self) -> float:
+        """The share of the object's image path that lies between consecutive frames both carrying a position."""
+        steps = np.linalg.norm(np.diff(self.points, axis=0), axis=1)
+        if steps.sum() <= 0:
+            return 0.0
+        seen = np.array([t is not None for t in self.templates])
+        return float(steps[seen[1:] & seen[:-1]].sum() / steps.sum())
 
     @property
     def moving(self) -> bool:
-        """Whether the reference object's image travels at least MIN_TRAVEL (and T5 scores its position)."""
+        """Whether the reference object's image visibly travels at least MIN_TRAVEL (and T5 scores its position)."""
         d = self.travel()
-        return len(d) >= 2 and float(d.max()) >= MIN_TRAVEL * self.size[0] / 128
+        return (len(d) >= 2 and float(d.max()) >= MIN_TRAVEL * self.size[0] / 128
+                and self.seen_motion() >= SEEN_MOTION)
 
     @property
     def turning(self) -> bool:
-        """Whether the reference object turns visibly in the image (and T5 scores its rotation)."""
-        return len(self.angles) >= 2 and float(np.abs(quarter_turn(self.angles - self.angles[0])).max()) >= ROT_VISIBLE
+        """Whether the reference object turns visibly in the image (and T5 scores its rotation): its matched
+        rotation and its simulator rotation about the camera's axis both reach ROT_VISIBLE over the used frames (a
+        hand covering part of a resting object changes the match, not the pose)."""
+        if len(self.angles) < 2:
+            return False
+        true = self.true_turn[self.used]
+        return (float(np.abs(quarter_turn(self.angles - self.angles[0])).max()) >= ROT_VISIBLE
+                and float(np.abs(true - true[0]).max()) >= ROT_VISIBLE)
 
     @property
     def scorable(self) -> bool:
         return self.moving or self.turning
 
 
-def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.ndarray) -> ObjectTrack:
-    """The reference side from its frames (T, H, W, 3) uint8, object labels (T, H, W), the evaluated object's label
-    and robot labels (T, H, W)."""
+def rotation_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
+    """(T, 4) unit quaternions (wxyz) → (T, 3, 3) rotation matrices."""
+    q = np.asarray(quat_wxyz, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def image_points(world_xyz: np.ndarray, intrinsic, extrinsic) -> np.ndarray:
+    """World points (T, 3) → (T, 2) pixel positions in the camera's own image (pixel centres at integers) through
+    OpenCV intrinsics (3×3) and world→camera extrinsics (3×4)."""
+    xyz = np.asarray(world_xyz, np.float64).reshape(-1, 3)
+    cam = (np.asarray(extrinsic, np.float64).reshape(3, 4) @ np.c_[xyz, np.ones(len(xyz))].T).T
+    if (cam[:, 2] <= 0).any():
+        raise ValueError("an object position lies behind the camera")
+    uv = (np.asarray(intrinsic, np.float64).reshape(3, 3) @ cam.T).T
+    return uv[:, :2] / uv[:, 2:]
+
+
+def image_turn(quat_wxyz: np.ndarray, extrinsic) -> np.ndarray:
+    """(T,) the object's rotation about the camera's optical axis since frame 0 (rad, unwrapped): the angle of the
+    best 2-D rotation fit to the camera-frame relative rotation's image-plane block."""
+    r = rotation_matrices(quat_wxyz)
+    cam = np.asarray(extrinsic, np.float64).reshape(3, 4)[:, :3]
+    rel = cam @ r @ r[0].T @ cam.T
+    return np.unwrap(np.arctan2(rel[:, 1, 0] - rel[:, 0, 1], rel[:, 0, 0] + rel[:, 1, 1]))
+
+
+class ObjectPose(NamedTuple):
+    """The evaluated object's simulator pose in every frame and the camera that drew it."""
+
+    poses: np.ndarray  # (T, 7): world xyz (m) + quaternion wxyz
+    intrinsic: np.ndarray  # 3×3
+    extrinsic: np.ndarray  # 3×4, world → camera
+
+
+def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.ndarray,
+                 pose: ObjectPose) -> ObjectTrack:
+    """The reference side from its frames (T, H, W, 3) uint8, object labels (T, H, W), the evaluated object's label,
+    robot labels (T, H, W) and the evaluated object's simulator pose in every frame."""
     if labels.shape != robot.shape or labels.shape != frames.shape[:3]:
         raise ValueError(f"frames {frames.shape}, object labels {labels.shape} and robot labels {robot.shape} differ")
+    poses = np.asarray(pose.poses, np.float64)
+    if poses.shape != (len(frames), 7):
+        raise ValueError(f"{len(frames)} frames but object poses of shape {poses.shape}")
+    points = image_points(poses[:, :3], pose.intrinsic, pose.extrinsic)
+    true_turn = image_turn(poses[:, 3:], pose.extrinsic)
     h = frames.shape[1]
     least = MIN_PIXELS * (h / 128) ** 2
     out: list[Template | None] = []
@@ -115,7 +184,7 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
         ys, xs = np.nonzero(visible)
         y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
         out.append(Template((int(x0), int(y0)), frame[y0:y1, x0:x1],
-                            visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
+                            visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()]), points[i]))
     used = [k for k, t in enumerate(out) if t is not None]
     turns = []
     if used:
@@ -123,7 +192,8 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
         (x0, y0), (th, tw) = t0.origin, t0.mask.shape
         turns = turned(t0._replace(pixels=smoothed(frames[used[0]], TURN_SMOOTH)[y0:y0 + th, x0:x0 + tw]))
     angles = np.array([orientation(smoothed(frames[k], TURN_SMOOTH), turns, out[k].centre) for k in used])
-    return ObjectTrack(out, frames.shape[1:3], search_region(out, frames.shape[1:3]), turns, angles)
+    return ObjectTrack(out, frames.shape[1:3], search_region(out, frames.shape[1:3]), turns, angles, points,
+                       true_turn)
 
 
 def turned(t: Template) -> list[Template]:
@@ -138,7 +208,8 @@ def turned(t: Template) -> list[Template]:
         m[:, 2] += (side - 1) / 2 - centre_in  # the centroid lands at the canvas centre
         pixels = cv2.warpAffine(t.pixels, m, (side, side), flags=cv2.INTER_LINEAR)
         mask = cv2.warpAffine(t.mask, m, (side, side), flags=cv2.INTER_NEAREST)
-        out.append(Template((0, 0), pixels, mask, np.array([(side - 1) / 2, (side - 1) / 2])))
+        centre = np.array([(side - 1) / 2, (side - 1) / 2])
+        out.append(Template((0, 0), pixels, mask, centre, centre))
     return out
 
 
@@ -220,10 +291,11 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
     by_turn = not track.moving and track.turning  # an object turning in place: its rotation is what can be seen
     found, turn = [], []
     for k in used:
-        frame = frames[frame_idx[k]]
-        found.append(locate(smoothed(frame), track.templates[k], track.region))
-        turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, found[-1]) if by_turn else 0.0)
-    return Positions(np.array(found), np.array([track.templates[k].centre for k in used]), np.array(turn),
+        frame, t = frames[frame_idx[k]], track.templates[k]
+        centroid = locate(smoothed(frame), t, track.region)
+        found.append(centroid + (t.anchor - t.centre))
+        turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, centroid) if by_turn else 0.0)
+    return Positions(np.array(found), np.array([track.templates[k].anchor for k in used]), np.array(turn),
                      quarter_turn(track.angles[: len(used)] - track.angles[0]) if by_turn else np.zeros(len(used)),
                      used, track.size[0] / 128)
 

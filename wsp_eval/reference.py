@@ -15,7 +15,8 @@ import numpy as np
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from wsp_eval.release_format import BENCHMARK_VERSION, FIRST_FRAME, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN
+from wsp_eval.release_format import (BENCHMARK_VERSION, FIRST_FRAME, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN,
+                                     OBJECT_POSES_KEY)
 from wsp_eval.video import VideoError
 
 
@@ -175,6 +176,21 @@ def _mask_row_groups(path: str, mtime_ns: int, size: int) -> tuple[pq.ParquetFil
         for episode in range(int(stats.min), int(stats.max) + 1):
             groups.setdefault(episode, []).append(g)
     return masks, groups
+
+
+def reference_object_poses(config_dir: Path, episode_index: int) -> np.ndarray:
+    """One episode's stored object poses in frame order (`object_poses`)."""
+    path = Path(config_dir) / "data"
+    try:
+        t = pq.read_table(path, columns=["episode_index", "frame_index", OBJECT_POSES_KEY],
+                          filters=[("episode_index", "=", episode_index)])
+    except (OSError, KeyError, ValueError) as e:
+        raise VideoError(f"{path}: cannot read {OBJECT_POSES_KEY} ({e})") from None
+    cells = t.sort_by("frame_index").column(OBJECT_POSES_KEY).to_pylist()
+    n = episodes(config_dir)[episode_index]["length"]
+    if len(cells) != n:
+        raise VideoError(f"{path}: episode {episode_index} has {len(cells)} {OBJECT_POSES_KEY} rows, expected {n}")
+    return object_poses(np.array(cells))
 
 
 def object_poses(stored: np.ndarray) -> np.ndarray:

@@ -27,15 +27,17 @@ from wsp_data.platforms.contract import Branch, Dropped, T5Rig, max_shift
 from wsp_data.platforms.interface import Rollout
 from wsp_data.schema import SOURCE_ROLE
 from wsp_data.staging import RolloutArrays
-from wsp_eval.object_track import object_track
+from wsp_eval.object_track import ObjectPose, object_track
 from wsp_eval.tracking import frame_size, project
 
 OTHER_OBJECT_MAX_SHIFT = 0.01  # m: any other object moving more is an unintended collision
 
 
-def object_motion_scorable(rgb: np.ndarray, robot: np.ndarray, objects: np.ndarray, ev: int) -> bool:
+def object_motion_scorable(rendered: Rollout, ev: int) -> bool:
     """Whether the evaluated object (column `ev`) moves visibly in its reference video (`ObjectTrack.scorable`)."""
-    return object_track(rgb, objects, ev + 1, robot).scorable
+    pose = ObjectPose(rendered.stack("object_poses")[:, ev], rendered.intrinsic, rendered.extrinsic)
+    return object_track(rendered.stack("rgb"), rendered.stack("objects"), ev + 1, rendered.stack("mask"),
+                        pose).scorable
 
 
 class T5Builder(SuiteBuilder):
@@ -95,7 +97,7 @@ class T5Builder(SuiteBuilder):
         poses = rendered.stack("object_poses")
         first = rendered.observations[0]
         pixel = project(poses[0, ev, :3], rendered.intrinsic, rendered.extrinsic, frame_size(first.rgb))
-        if not object_motion_scorable(rendered.stack("rgb"), rendered.stack("mask"), rendered.stack("objects"), ev):
+        if not object_motion_scorable(rendered, ev):
             return Dropped("no_scorable_object_motion", steps, simulated)
         base_xy = rig.base_xy()
         _, measured = check(primitive, poses[:, ev], rendered.stack("contacts")[:, ev], base_xy, **self.thresholds)

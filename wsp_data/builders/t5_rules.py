@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_data.platforms.contract import MOTION_ONSET, PRIMITIVES, rotation_matrices
+from wsp_data.platforms.contract import MOTION_ONSET, PRIMITIVES
+from wsp_eval.object_track import rotation_matrices
 
 PUSH_MIN_XY = 0.015  # m
 PULL_MIN_TOWARD_BASE = 0.05  # m

@@ -12,7 +12,7 @@ it imports no builder and no simulator.
   on every platform (`false_contact`).
 - T5 (docs/suites/t5.md): the primitives (`PRIMITIVES`), the branch point (`BACKOFF` steps before
   `first_contact`, which counts motion from `MOTION_ONSET`), the untouched-prop check (`max_shift`,
-  `SOURCE_PROP_MAX_SHIFT`) and quaternion rotations (`rotation_matrices`).
+  `SOURCE_PROP_MAX_SHIFT`); quaternion rotations are `wsp_eval.object_track.rotation_matrices`.
 """
 
 from __future__ import annotations
@@ -274,13 +274,3 @@ def max_shift(poses: np.ndarray) -> float:
     return float(np.linalg.norm(poses[:, :3] - poses[0, :3], axis=1).max())
 
 
-def rotation_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
-    """(T, 4) unit quaternions (wxyz) → (T, 3, 3) rotation matrices."""
-    q = np.asarray(quat_wxyz, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)

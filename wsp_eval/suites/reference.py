@@ -11,7 +11,8 @@ import numpy as np
 
 from wsp_eval.flow import ReferenceFlows, reference_flows
 from wsp_eval.flow_cache import load_or_compute
-from wsp_eval.reference import iter_reference_frames, reference_masks, reference_object_masks
+from wsp_eval.object_track import ObjectPose
+from wsp_eval.reference import iter_reference_frames, reference_masks, reference_object_masks, reference_object_poses
 from wsp_eval.reference_cache import entry_folder, load_or_compute_result
 from wsp_eval.release_format import split_config
 
@@ -70,6 +71,15 @@ class InstanceReference:
         key = ("objects", role)
         if key not in self._cache:
             self._cache[key] = reference_object_masks(self.config_dir, self.episode(role))
+        return self._cache[key]
+
+    def object_pose(self, role: str, k: int) -> ObjectPose:
+        """Object column `k`'s simulator pose in every frame of the role, with the instance's camera."""
+        key = ("pose", role, k)
+        if key not in self._cache:
+            poses = reference_object_poses(self.config_dir, self.episode(role))[:, k]
+            self._cache[key] = ObjectPose(poses, np.asarray(self.row["camera_intrinsic"], np.float64),
+                                          np.asarray(self.row["camera_extrinsic"], np.float64))
         return self._cache[key]
 
     def first_mask(self, role: str) -> np.ndarray:

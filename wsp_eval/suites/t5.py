@@ -37,8 +37,9 @@ class _Reference:
         self.ref, self.row, self.platform = ref, ref.row, ref.platform
         self.duration = clip_duration(ref.num_frames("reference"), ref.fps)
         self.flow = backends.flow
-        self.track = object_track(ref.frames("reference"), ref.object_masks("reference"),
-                                  int(self.row["evaluated_index"]) + 1, ref.masks("reference"))
+        k = int(self.row["evaluated_index"])
+        self.track = object_track(ref.frames("reference"), ref.object_masks("reference"), k + 1,
+                                  ref.masks("reference"), ref.object_pose("reference", k))
         self._arm: dict[float, object] = {}
         self.judged = ref.cached(self._judge_reference(backends.judge))
 

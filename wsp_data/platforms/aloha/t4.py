@@ -17,9 +17,10 @@ import numpy as np
 
 from wsp_data.platforms.contract import (
     CLEARANCE, DISTRACTOR_MARGIN, KINDS, PLACEMENT_TRIES, REACH_Z, SWEPT_MARGIN, Proposal, Sight, TaskRig, box_gap,
-    false_contact, point_gaps, rotation_matrices,
+    false_contact, point_gaps,
 )
 from wsp_data.schema import MAX_OBJECTS
+from wsp_eval.object_track import rotation_matrices
 
 TABLE = ((-0.25, 0.25), (0.32, 0.68))  # m: x and y ranges a placed object may take (on the table, in view, in reach)
 _CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
