@@ -91,7 +91,7 @@ def server_env(tmp_path_factory) -> tuple[Path, Path]:
 
 
 class Served:
-    """A `python -m wsp_serve SPEC --port 0` process of the server venv, and the port it listens on."""
+    """A `python -m wsp_serve MODULE:CALLABLE --port 0` process of the server venv, and the port it listens on."""
 
     def __init__(self, env: tuple[Path, Path], spec: str, *args: str):
         python, work = env
@@ -195,7 +195,8 @@ def test_a_restarted_server_is_reconnected_to_within_the_window(t1_release, serv
     thread = threading.Thread(target=lambda: results.append(
         generate_remote(server.url, t1_release, tmp_path, seeds=(0,), progress=False, reconnect=60)))
     thread.start()
-    while not list(tmp_path.rglob("*.mp4")):
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.rglob("*.mp4")) and time.monotonic() < deadline:
         time.sleep(0.02)
     server.kill()
     time.sleep(0.5)

@@ -36,8 +36,8 @@ def pack_array(obj: object) -> object:
     if isinstance(obj, (np.ndarray, np.generic)) and obj.dtype.kind in REFUSED_KINDS:
         raise ValueError(f"unsupported dtype: {obj.dtype}")
     if isinstance(obj, np.ndarray):
-        return {b"__ndarray__": True, b"data": np.ascontiguousarray(obj).tobytes(), b"dtype": obj.dtype.str,
-                b"shape": obj.shape}
+        data = memoryview(np.ascontiguousarray(obj).reshape(-1).view(np.uint8))  # its bytes, not copied
+        return {b"__ndarray__": True, b"data": data, b"dtype": obj.dtype.str, b"shape": obj.shape}
     if isinstance(obj, np.generic):
         return {b"__npgeneric__": True, b"data": obj.item(), b"dtype": obj.dtype.str}
     raise TypeError(f"cannot send a {type(obj).__name__}")
