@@ -14,7 +14,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = ("wsp_data", "wsp_eval", "wsp_models")
+PACKAGES = ("wsp_data", "wsp_eval", "wsp_models", "wsp_serve")
 SCRIPT_FOLDERS = ("scripts", "benchmarks")  # folders of scripts: file x.py is module `folder.x`
 ROOTS = PACKAGES + SCRIPT_FOLDERS
 FORBIDDEN = ("wsp_data", "torch", "sapien", "mani_skill", "mujoco", "lerobot")

@@ -12,6 +12,7 @@ build-side code, and in the scoring-only install a build-side command stops with
     wsp verify DIR                                                   check every release file against release.json
     wsp baseline NAME --release DIR --out SUBMISSION                 write a calibration-baseline submission
     wsp generate --model MODULE:CALLABLE --release DIR --out SUB     run a model over a release → submission
+    wsp generate --model ws://HOST:PORT --release DIR --out SUB      the same through a model server (`wsp-serve`)
     wsp score SUBMISSION --release DIR --out REPORT_DIR              score a submission: JSON, Markdown, HTML
     wsp calibrate --release DIR --out DIR                            every baseline, scored, in one table
     wsp teleop --task T --seed S --operator NAME                     browser teleoperation → source trajectory
@@ -79,17 +80,24 @@ def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     bl.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     bl.add_argument("--out", type=Path, required=True)
     bl.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    g = sub.add_parser("generate", help="run a model callable over a release and write a submission")
+    g = sub.add_parser("generate", help="run a model (a callable, or a model server) over a release and write a "
+                                        "submission")
     g.add_argument("--model", required=True, help="MODULE:CALLABLE taking (first_frame, actions, fps, seed), or a "
-                                                   "batched one (README), or a registered name: reference")
-    g.add_argument("--name", help="model name for submission.json (default: the MODULE:CALLABLE)")
+                                                   "batched one (README), or a registered name: reference, or "
+                                                   "ws://HOST:PORT, a model server (`wsp-serve`)")
+    g.add_argument("--name", help="model name for submission.json (default: the MODULE:CALLABLE, or the model "
+                                  "server's model name)")
     g.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     g.add_argument("--out", type=Path, required=True)
     g.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     g.add_argument("--configs", nargs="+", help="only these configs (default: every scored config)")
-    g.add_argument("--action-key", default="action", choices=("action", "action.ee", "action.joint"),
-                   help="the native stream (default) or the one stored beside it: action.ee on ManiSkill, "
-                        "action.joint on LIBERO")
+    g.add_argument("--action-key", choices=("action", "action.ee", "action.joint"),
+                   help="the native stream (default; a model server states its own) or the one stored beside it: "
+                        "action.ee on ManiSkill and ALOHA, action.joint on LIBERO")
+    g.add_argument("--timeout", type=float, default=1800.0,
+                   help="with ws://: seconds to wait for one batch's reply (default 1800)")
+    g.add_argument("--reconnect", type=float, default=120.0,
+                   help="with ws://: seconds to keep retrying a lost or refused connection (default 120)")
     g.add_argument("--quiet", action="store_true")
     sc = sub.add_parser("score", help="score a submission against a release; write JSON, Markdown and HTML reports")
     sc.add_argument("submission", type=Path)
@@ -238,15 +246,24 @@ def cmd_baseline(args) -> int:
 
 def cmd_generate(args) -> int:
     from wsp_eval.generate import GenerateError, generate, load_model
+    from wsp_eval.model_client import generate_remote, is_server_url
 
+    served = ""
     try:
-        model = load_model(args.model)
-        result = generate(model, _release_or_error(args.release), args.out, seeds=tuple(args.seeds),
-                          configs=args.configs, name=args.name or args.model, action_key=args.action_key,
-                          progress=not args.quiet)
+        if is_server_url(args.model):
+            result, hello = generate_remote(args.model, _release_or_error(args.release), args.out,
+                                            seeds=tuple(args.seeds), configs=args.configs, name=args.name,
+                                            action_key=args.action_key, progress=not args.quiet,
+                                            timeout=args.timeout, reconnect=args.reconnect)
+            served = f" by {hello.model} (version {hello.version}) at {args.model}"
+        else:
+            model = load_model(args.model)
+            result = generate(model, _release_or_error(args.release), args.out, seeds=tuple(args.seeds),
+                              configs=args.configs, name=args.name or args.model,
+                              action_key=args.action_key or "action", progress=not args.quiet)
     except GenerateError as e:
         raise CliError(str(e)) from None
-    print(f"{args.out}: {result.written} video(s) written, {result.skipped} already there, "
+    print(f"{args.out}: {result.written} video(s) written{served}, {result.skipped} already there, "
           f"{result.seconds:.1f} s; check it with `wsp validate {args.out} --release {args.release}`")
     return 0
 

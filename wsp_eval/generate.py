@@ -11,6 +11,8 @@ A model is either
   `model(requests) -> list of frames`, `requests` a list of at most `wsp_batch_size`
   `Request(first_frame, actions, fps, seed)` of one config (same resolution and action width), answered
   in order.
+Both are defined on the model side, `wsp_serve.callables`, which `wsp-serve` runs in a model's own environment
+(`wsp_eval.model_client` is the other end: `wsp generate --model ws://HOST:PORT`).
 `load_model("module:callable")` finds one, or `load_model(name)` one registered in `MODELS` (a zero-argument
 factory, from the entry-point group `worldsimprobe.models`: this distribution declares `reference`, its reference
 world model, which needs the `train` extra). A model
@@ -18,24 +20,20 @@ may carry a dict `wsp_info` (its version, checkpoints); it is written into submi
 
 `write_submission` is the loop shared with the calibration baselines: each video is written to a temp name
 in its folder and renamed into place, so a killed run never leaves a truncated mp4, and the same call run
-again skips the videos already there. submission.json is rewritten after every video; its
-`generation_seconds` (time spent producing frames: the model call and reading its inputs) accumulates over
-resumed runs.
+again skips the videos already there; a batch is checked whole before any of its videos is written.
+submission.json is rewritten after every batch; its `generation_seconds` (time spent producing frames: the model
+call and reading its inputs) accumulates over resumed runs.
 """
 
 from __future__ import annotations
 
-import functools
-import importlib
 import json
 import os
 import platform
-import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import NamedTuple
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -48,37 +46,22 @@ from wsp_eval.registry import Registry
 from wsp_eval.release_format import BENCHMARK_VERSION, INSTANCES
 from wsp_eval.submission import SUBMISSION_JSON, VIDEO_NAME, test_configs
 from wsp_eval.video import write_video
+from wsp_serve import callables
+from wsp_serve.callables import CallableError, load_callable
+from wsp_serve.callables import MAX_BATCH, Request, batched  # noqa: F401  (the model side's, re-exported)
 
 Model = Callable[[np.ndarray, np.ndarray, float, int], np.ndarray]
 Producer = Callable[[EpisodeContext], np.ndarray]
 BatchProducer = Callable[[list[EpisodeContext]], list[np.ndarray]]
-MAX_BATCH = 1024
-
-
-class Request(NamedTuple):
-    """One video a batched model is asked for (the per-episode call's arguments)."""
-    first_frame: np.ndarray  # (H, W, 3) uint8, the reference frame 0
-    actions: np.ndarray  # (T, D) float32
-    fps: float
-    seed: int
-
-
-def batched(batch_size: int) -> Callable[[Callable], Callable]:
-    """Mark `fn(requests: list[Request]) -> list[frames]` as a batched model taking up to `batch_size` requests."""
-    def mark(fn: Callable) -> Callable:
-        fn.wsp_batch_size = batch_size
-        return fn
-    return mark
+Extra = Callable[[dict], dict]  # the previous submission.json (or {}) -> more keys for submission.json
 
 
 def batch_size_of(model: object) -> int | None:
     """The model's batch size if it is a batched model, None for a per-episode one (GenerateError if invalid)."""
-    size = getattr(model, "wsp_batch_size", None)
-    if size is None:
-        return None
-    if isinstance(size, bool) or not isinstance(size, int) or not 1 <= size <= MAX_BATCH:
-        raise GenerateError(f"model wsp_batch_size {size!r}: expected an integer from 1 to {MAX_BATCH}")
-    return size
+    try:
+        return callables.batch_size_of(model)
+    except CallableError as e:
+        raise GenerateError(str(e)) from None
 
 
 class GenerateError(RuntimeError):
@@ -107,21 +90,12 @@ def load_model(spec: str) -> Model:
             raise GenerateError(f"model {spec!r} needs the train extra (missing module {e.name!r}): "
                                 "pip install 'worldsimprobe[train]', or `make setup`") from None
     if not (sep and module_name and attr):
-        raise GenerateError(f"model {spec!r}: expected 'module:callable' or a registered name "
+        raise GenerateError(f"model {spec!r}: expected 'module:callable', ws://HOST:PORT or a registered name "
                             f"({', '.join(MODELS)})")
-    if os.getcwd() not in sys.path and "" not in sys.path:
-        sys.path.insert(0, os.getcwd())
     try:
-        module = importlib.import_module(module_name)
-    except ImportError as e:
-        raise GenerateError(f"model {spec!r}: cannot import module {module_name!r} ({e})") from e
-    try:
-        obj = functools.reduce(getattr, attr.split("."), module)
-    except AttributeError:
-        raise GenerateError(f"model {spec!r}: module {module_name!r} has no attribute {attr!r}") from None
-    if not callable(obj):
-        raise GenerateError(f"model {spec!r}: {attr!r} is a {type(obj).__name__}, not callable")
-    return obj
+        return load_callable(spec)
+    except CallableError as e:
+        raise GenerateError(str(e)) from e.__cause__
 
 
 def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (0, 1, 2),
@@ -129,46 +103,55 @@ def generate(model: Model, release: Path, out: Path, *, seeds: Sequence[int] = (
              progress: bool = True) -> GenerateResult:
     """Run `model` (per-episode or batched, see the module doc) on every scored episode × seed of `release` (or
     of `configs`) and write, or resume, the submission of model `name` in `out`."""
-    def request(ctx: EpisodeContext) -> Request:
-        try:
-            actions = ctx.actions(action_key)
-        except ValueError as e:
-            raise GenerateError(str(e)) from None
-        return Request(ctx.first_frame().copy(), actions.copy(), ctx.fps, ctx.seed)
-
     size = batch_size_of(model)
     if size is None:
         def produce(ctxs: list[EpisodeContext]) -> list[np.ndarray]:
-            return [model(*request(ctx)) for ctx in ctxs]
+            return [model(*request_of(ctx, action_key)) for ctx in ctxs]
     else:
         def produce(ctxs: list[EpisodeContext]) -> list[np.ndarray]:
-            return model([request(ctx) for ctx in ctxs])  # checked in `_write_batch`
+            return model([request_of(ctx, action_key) for ctx in ctxs])  # checked in `_write_batch`
 
     info = getattr(model, "wsp_info", None)
     return write_submission(produce, release, out, seeds=seeds, configs=configs, name=name, progress=progress,
                             batch_size=size or 1, info=info if isinstance(info, dict) else None)
 
 
+def request_of(ctx: EpisodeContext, action_key: str) -> Request:
+    """What a model is given for episode `ctx`: its first frame and its `action_key` stream (writable copies)."""
+    try:
+        actions = ctx.actions(action_key)
+    except ValueError as e:
+        raise GenerateError(str(e)) from None
+    return Request(ctx.first_frame().copy(), actions.copy(), ctx.fps, ctx.seed)
+
+
 def write_submission(produce: BatchProducer, release: Path, out: Path, *, seeds: Sequence[int],
                      configs: Sequence[str] | None = None, name: str, progress: bool, batch_size: int = 1,
-                     info: dict | None = None) -> GenerateResult:
+                     info: dict | None = None, extra: Extra | None = None) -> GenerateResult:
     """Write `produce(contexts)` (a list of frames per list of up to `batch_size` episode contexts) for every
     scored episode × seed as `<out>/<config>/<episode_id>/seed<k>.mp4`, skipping videos already there, then
-    submission.json; `out` is held by this process alone (`wsp_eval.folder_lock`)."""
+    submission.json; `out` is held by this process alone (`wsp_eval.folder_lock`). `extra(previous)`, given the
+    submission.json found in `out` ({} if none), returns more keys for it: it is called before the first video
+    (a GenerateError there refuses the folder) and at every rewrite."""
     release, out = Path(release), Path(out)
     seeds, configs = _check_seeds(seeds), _check_configs(release, configs)
     if not isinstance(name, str) or not name:
         raise GenerateError(f"model name must be a non-empty string, got {name!r}")
     try:
         with folder_lock.exclusive(out, "wsp generate"):
-            return _write_locked(produce, release, out, seeds, configs, name, progress, batch_size, info)
+            return _write_locked(produce, release, out, seeds, configs, name, progress, batch_size, info, extra)
     except folder_lock.FolderBusy as e:
         raise GenerateError(str(e)) from None
 
 
 def _write_locked(produce: BatchProducer, release: Path, out: Path, seeds: list[int], configs: list[str],
-                  name: str, progress: bool, batch_size: int, info: dict | None) -> GenerateResult:
-    before = _previous_seconds(out, name)
+                  name: str, progress: bool, batch_size: int, info: dict | None,
+                  extra: Extra | None) -> GenerateResult:
+    previous = _previous_manifest(out, name)
+    before = previous.get("generation_seconds", 0)
+    before = float(before) if isinstance(before, (int, float)) and not isinstance(before, bool) else 0.0
+    more = (lambda: extra(previous)) if extra else dict
+    more()
     written = skipped = 0
     seconds = 0.0
     total = len(seeds) * sum(len(ids) for c in configs for ids in _column(release, c, "episode_ids"))
@@ -179,7 +162,7 @@ def _write_locked(produce: BatchProducer, release: Path, out: Path, seeds: list[
         if pending:
             seconds += _write_batch(produce, pending)
             written += len(pending)
-            _write_manifest(out, name, seeds, configs, before + seconds, info)
+            _write_manifest(out, name, seeds, configs, before + seconds, info, more())
             bar.update(len(pending))
             pending.clear()
 
@@ -197,7 +180,7 @@ def _write_locked(produce: BatchProducer, release: Path, out: Path, seeds: list[
                 if len(pending) >= batch_size:
                     flush()
         flush()
-    _write_manifest(out, name, seeds, configs, before + seconds, info)
+    _write_manifest(out, name, seeds, configs, before + seconds, info, more())
     return GenerateResult(written, skipped, seconds)
 
 
@@ -208,29 +191,11 @@ def per_episode(produce: Producer) -> BatchProducer:
 
 def check_frames(frames: object, num_frames: int, where: str, size: tuple[int, int] | None = None) -> np.ndarray:
     """`frames` as (num_frames, H, W, 3) uint8 — (H, W) = `size` when given, the reference's — or a GenerateError
-    naming `where` and what is wrong."""
+    naming `where` and what is wrong (`wsp_serve.callables.check_frames`, which a model server runs too)."""
     try:
-        arr = np.asarray(frames)
-    except (TypeError, ValueError, RuntimeError) as e:
-        raise GenerateError(f"{where}: the model returned a {type(frames).__name__}, not an array ({e})") from None
-    if arr.dtype.kind not in "uif":
-        raise GenerateError(f"{where}: frames of dtype {arr.dtype}; expected uint8 (or numbers in [0, 255])")
-    if arr.ndim != 4 or arr.shape[-1] != 3 or 0 in arr.shape[1:3]:
-        raise GenerateError(f"{where}: frames of shape {arr.shape}; expected (N, H, W, 3)")
-    if len(arr) != num_frames:
-        raise GenerateError(f"{where}: {len(arr)} frames; the reference horizon is {num_frames}")
-    if size is not None and arr.shape[1:3] != tuple(size):
-        raise GenerateError(f"{where}: frames of {arr.shape[2]}×{arr.shape[1]} pixels; the reference frame is "
-                            f"{size[1]}×{size[0]}: return frames at its resolution (resample in the model's "
-                            "adapter; scoring refuses other resolutions, docs/submission.md)")
-    if arr.dtype == np.uint8:
-        return arr
-    if not np.isfinite(arr).all():
-        raise GenerateError(f"{where}: frames contain NaN or infinite values")
-    lo, hi = arr.min(), arr.max()
-    if lo < 0 or hi > 255:
-        raise GenerateError(f"{where}: values span [{lo}, {hi}], outside [0, 255]")
-    return np.rint(arr).astype(np.uint8)
+        return callables.check_frames(frames, num_frames, where, size)
+    except CallableError as e:
+        raise GenerateError(str(e)) from None
 
 
 def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]]) -> float:
@@ -248,9 +213,9 @@ def _write_batch(produce: BatchProducer, items: list[tuple[EpisodeContext, Path]
         got = f"{len(batch)} item(s)" if isinstance(batch, (list, tuple)) else f"a {type(batch).__name__}"
         raise GenerateError(f"{where}: asked for {len(items)} video(s), returned {got}; a batched model returns a "
                             "list with one frame array per request, in order")
-    for frames, (ctx, path) in zip(batch, items):
-        frames = check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}",
-                              ctx.first_frame().shape[:2])
+    checked = [check_frames(frames, ctx.num_frames, f"{ctx.config}/{ctx.episode_id}/seed{ctx.seed}",
+                            ctx.first_frame().shape[:2]) for frames, (ctx, _) in zip(batch, items)]
+    for frames, (ctx, path) in zip(checked, items):
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.stem}.partial{path.suffix}")  # keeps .mp4: the muxer goes by the suffix
         try:
@@ -292,11 +257,11 @@ def _check_configs(release: Path, configs: Sequence[str] | None) -> list[str]:
     return list(configs)
 
 
-def _previous_seconds(out: Path, name: str) -> float:
-    """generation_seconds of a submission of the same model already in `out` (0 if none); refuses another's."""
+def _previous_manifest(out: Path, name: str) -> dict:
+    """The submission.json of the same model already in `out` ({} if none); refuses another model's."""
     path = out / SUBMISSION_JSON
     if not path.is_file():
-        return 0.0
+        return {}
     try:
         meta = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -304,16 +269,16 @@ def _previous_seconds(out: Path, name: str) -> float:
     model = meta.get("model") if isinstance(meta, dict) else None
     if model != name:
         raise GenerateError(f"{path}: holds a submission of model {model!r}, not {name!r}; write to another folder")
-    previous = meta.get("generation_seconds", 0)
-    return float(previous) if isinstance(previous, (int, float)) else 0.0
+    return meta
 
 
 def _write_manifest(out: Path, name: str, seeds: list[int], configs: list[str], seconds: float,
-                    info: dict | None = None) -> None:
+                    info: dict | None = None, extra: dict | None = None) -> None:
     meta = {"model": name, "benchmark_version": BENCHMARK_VERSION, "seeds": seeds, "configs": configs,
             "hardware": platform.processor() or platform.machine(), "generation_seconds": round(seconds, 3)}
     if info:
         meta["model_info"] = info
+    meta.update(extra or {})
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / f".{SUBMISSION_JSON}.partial"
     tmp.write_text(json.dumps(meta, indent=1))

@@ -93,6 +93,16 @@ def _header(report: dict) -> list[tuple[str, str]]:
         items.append(("Hardware", str(sub["hardware"])))
     if sub.get("generation_seconds") is not None:
         items.append(("Generation time", f"{sub['generation_seconds']:.1f} s"))
+    server = sub.get("model_server") or {}
+    if server:
+        seconds = server.get("generation_seconds")
+        items.append(("Model server", f"{server.get('model', DASH)} version {server.get('version', DASH)} at "
+                                      f"{server.get('url', DASH)}"
+                                      + (f", {seconds:.1f} s in the model" if isinstance(seconds, (int, float))
+                                         else "")))
+    resampled = _resampled(sub.get("resampling") or {})
+    if resampled:
+        items.append(("Resampled", resampled))
     items.append(("Missing rollouts", _missing(report)))
     if str(report.get("encoding_check", "")).startswith("off"):
         items.append(("Encoding check", f"{report['encoding_check']}: not comparable with lossless submissions"))
@@ -111,6 +121,20 @@ def _header(report: dict) -> list[tuple[str, str]]:
                       + (f" in {timing['seconds']:.1f} s" if timing.get("seconds") is not None else "")
                       + (f" with {timing['workers']} workers" if timing.get("workers") else "")))
     return items
+
+
+def _resampled(resampling: dict) -> str:
+    """The conversions `wsp generate` made for a model server of another size or frame rate, in words."""
+    parts = []
+    size, fps = resampling.get("size") or {}, resampling.get("fps") or {}
+    if size:
+        parts.append(f"generated at {'×'.join(map(str, size.get('model') or []))}, converted from and to "
+                     f"{', '.join('×'.join(map(str, s)) for s in size.get('reference') or [])} "
+                     f"({size.get('method', DASH)})")
+    if fps:
+        parts.append(f"generated at {fps.get('model', DASH)} fps, converted from and to "
+                     f"{', '.join(map(str, fps.get('release') or []))} fps ({fps.get('method', DASH)})")
+    return "; ".join(parts)
 
 
 def _missing(report: dict) -> str:

@@ -329,7 +329,8 @@ def _score_verified(submission: Path, release: Path, out: Path, rel_meta: dict, 
     report = aggregate(records, rows, configs)
     report.update(
         submission={"path": str(submission), "model": meta["model"], "seeds": meta["seeds"],
-                    "hardware": meta.get("hardware"), "generation_seconds": meta.get("generation_seconds")},
+                    "hardware": meta.get("hardware"), "generation_seconds": meta.get("generation_seconds"),
+                    **{k: meta[k] for k in ("model_server", "resampling") if isinstance(meta.get(k), dict)}},
         release={"path": str(release), "version": rel_meta["version"],
                  "code_version": str(rel_meta.get("code_version", "")),
                  "release_json_sha256": release_json_sha256(release),
