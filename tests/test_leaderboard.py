@@ -78,13 +78,22 @@ def test_html_sorts_in_a_browser(reports, tmp_path):
     driver = _browser()
     try:
         driver.get((out / "leaderboard.html").as_uri())
-        first = lambda: driver.find_elements(By.CSS_SELECTOR, "tbody tr")[0].find_elements(By.TAG_NAME, "td")[0].text  # noqa: E731
-        headers = driver.find_elements(By.CSS_SELECTOR, "thead th")
-        t2 = next(h for h in headers if h.text == "maniskill t2")
+        overall, suites = (driver.find_element(By.CSS_SELECTOR, f"table.{c}") for c in ("overall", "suites"))
+        assert [h.text for h in overall.find_elements(By.CSS_SELECTOR, "thead th")] == [
+            "model", "macro average", "maniskill Overall"]  # the headline first: macro, then each platform
+        assert [h.text for h in suites.find_elements(By.CSS_SELECTOR, "th.platform")] == ["maniskill"]
+
+        def first(table) -> str:
+            return table.find_elements(By.CSS_SELECTOR, "tbody tr")[0].find_elements(By.TAG_NAME, "td")[0].text
+
+        t2 = suites.find_element(By.CSS_SELECTOR, 'th[data-col="maniskill t2"]')
+        assert t2.text == "T2"  # under its platform's grouped header
         t2.click()
-        assert first() == "baseline:oracle"  # sorted by T2, best first
-        headers[0].click()
-        assert first() == "baseline:oracle"  # by name: "baseline:oracle" < "baseline:static"
+        assert first(suites) == "baseline:oracle"  # sorted by T2, best first
+        suites.find_element(By.CSS_SELECTOR, 'th[data-col="model"]').click()
+        assert first(suites) == "baseline:oracle"  # by name: "baseline:oracle" < "baseline:static"
+        overall.find_element(By.CSS_SELECTOR, 'th[data-col="macro overall"]').click()
+        assert first(overall) == "baseline:oracle"
         driver.save_screenshot(str(tmp_path / "leaderboard.png"))
     finally:
         driver.quit()
