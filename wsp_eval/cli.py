@@ -114,7 +114,8 @@ def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     ca.add_argument("--baselines", nargs="+", help="default: all registered baselines")
     ca.add_argument("--seeds", type=int, nargs="+", default=[0])
     _score_options(ca)
-    st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md)")
+    st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md) and the paper's "
+                                      "analyses (docs/analyses.md)")
     study = st.add_subparsers(dest="study", required=True)
     co = study.add_parser("corruption", help="RMFA drop under blur and texture removal, robot region vs background")
     co.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
