@@ -157,7 +157,8 @@ def test_ranking_consistency(tmp_path):
             expected = spearmanr([scores[m][a][suite] for m in scores], [scores[m][b][suite] for m in scores])[0]
             assert pair["suites"][suite]["spearman"] == pytest.approx(expected, abs=1e-12)
             assert pair["suites"][suite]["meaningful"] and pair["suites"][suite]["models"] == 5
-    assert c["mean_pairwise_overall"] == pytest.approx(np.mean([p["suites"]["overall"]["spearman"] for p in c["pairs"]]))
+    overall = [p["suites"]["overall"]["spearman"] for p in c["pairs"]]
+    assert c["mean_pairwise_overall"] == pytest.approx(np.mean(overall))
     page = (tmp_path / "lb" / "leaderboard.html").read_text()
     assert "Ranking consistency" in page and page.index("macro average") < page.index("Suites per platform")
     assert main(["leaderboard", *map(str, paths[:3]), "--out", str(tmp_path / "few")]) == 0

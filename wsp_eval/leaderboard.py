@@ -245,7 +245,8 @@ def _consistency_lines(c: dict) -> list[str]:
     suites = _consistency_suites(c)
     lines = [_consistency_title(c), "", "| platforms | " + " | ".join(suites) + " |", "|---|" + "---|" * len(suites)]
     for p in c["pairs"]:
-        lines.append(f"| {' – '.join(p['platforms'])} | " + " | ".join(_rho(p["suites"].get(s)) for s in suites) + " |")
+        cells = " | ".join(_rho(p["suites"].get(s)) for s in suites)
+        lines.append(f"| {' – '.join(p['platforms'])} | {cells} |")
     return lines + (["", f"Note: {c['note']}."] if c["note"] else [])
 
 

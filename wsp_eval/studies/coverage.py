@@ -207,7 +207,8 @@ def markdown(result: dict) -> str:
             gv = "—" if d["generalised_variance"] is None else f"{d['generalised_variance']:.3g}"
             reach = "—" if d["reach"] is None else f"{d['reach']:.3f}"
             beyond = {None: "—", True: "yes", False: "no"}[d.get("reaches_beyond_expert")] if s != "expert" else ""
-            outside = "" if s == "expert" or d["outside_expert_hull"] is None else f"{100 * d['outside_expert_hull']:.0f} %"
+            share = d["outside_expert_hull"]
+            outside = "" if s == "expert" or share is None else f"{100 * share:.0f} %"
             lines.append(f"| {platform} | {p['task']} | {ev} | {s} | {d['n']} | {d['hull_area']:.3g} | {gv} | "
                          f"{reach} | {outside} | {beyond} |")
     return "\n".join(lines) + "\n"

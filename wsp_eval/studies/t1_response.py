@@ -118,8 +118,8 @@ def figure(result: dict, path: Path) -> None:
         for name, a in models.items():
             c = a["pooled"]["curve"]
             k = a["pooled"]["compression"]["slope"]
-            ax.errorbar([p["magnitude"] for p in c], [p["model"]["mean"] for p in c], yerr=_yerr([p["model"] for p in c]),
-                        marker="o", capsize=3, label=f"{name} (slope {_f(k)})")
+            ax.errorbar([p["magnitude"] for p in c], [p["model"]["mean"] for p in c],
+                        yerr=_yerr([p["model"] for p in c]), marker="o", capsize=3, label=f"{name} (slope {_f(k)})")
         ax.set_title(config)
         ax.set_xlabel("perturbation magnitude (native units)")
         ax.set_ylabel("relative response D / task mean")
