@@ -59,7 +59,8 @@ def _motion(release, config, episode) -> np.ndarray:
     frames = []
     for path in glob.glob(str(release / config / "data" / "*" / "*.parquet")):
         t = pq.read_table(path, columns=["episode_index", "frame_index", "observation.state"]).to_pandas()
-        frames += [(f, s) for e, f, s in zip(t["episode_index"], t["frame_index"], t["observation.state"]) if e == episode]
+        frames += [(f, s) for e, f, s in zip(t["episode_index"], t["frame_index"], t["observation.state"])
+                   if e == episode]
     q = np.array([s for _, s in sorted(frames, key=lambda x: x[0])], float)[:, arm]
     q = q - q[0]
     grid = np.linspace(0, 1, 50)
@@ -188,3 +189,40 @@ def test_bad_input_is_one_line(t1_release, suites_release, suites_reports, tmp_p
     assert "not a `wsp score` report" in capsys.readouterr().err
     assert main(["study", "coverage", "--release", str(t1_release), "--out", str(tmp_path / "c")]) == 2
     assert "no T2 or T3 config" in capsys.readouterr().err
+
+
+def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp_path, capsys):
+    """The ridge IDM: two trainings give the same checkpoint, under the size limit, equal to the ridge solution of
+    the augmented least-squares system; `wsp study idm` reports Micro-MSE per stream kind on the references and on
+    a submission (the oracle's videos: the references re-encoded, so nearly the references' error)."""
+    from wsp_eval.reference import reference_frames
+    from wsp_eval.studies import idm
+
+    for k in (1, 2):
+        assert main(["study", "idm-train", "--release", str(libero_release), "--platform", "libero", "--out",
+                     str(tmp_path / f"idm{k}.json")]) == 0
+    one, two = ((tmp_path / f"idm{k}.json").read_bytes() for k in (1, 2))
+    assert one == two and len(one) <= idm.MAX_CHECKPOINT_BYTES
+    c = json.loads(one)
+    config = libero_release / "train_libero"
+    stream = idm.actions(config)
+    xs, ys = zip(*(idm.pairs(reference_frames(config, e), stream[e]) for e in sorted(stream)))
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    z = np.hstack([(x - x.mean(0)) / (x.std(0) + 1e-9), np.ones((len(x), 1))])
+    penalty = np.sqrt(idm.RIDGE) * np.eye(z.shape[1])[:-1]
+    expected = np.linalg.lstsq(np.vstack([z, penalty]), np.vstack([y, np.zeros((len(penalty), y.shape[1]))]),
+                               rcond=None)[0]
+    assert np.allclose(c["weights"], expected, atol=1e-8)
+
+    write_baseline("oracle", libero_release, tmp_path / "oracle", seeds=(0,))
+    assert main(["study", "idm", "--release", str(libero_release), "--checkpoint", str(tmp_path / "idm1.json"),
+                 "--submission", str(tmp_path / "oracle"), "--out", str(tmp_path / "out")]) == 0
+    assert "Micro-MSE" in capsys.readouterr().out
+    kinds = json.loads((tmp_path / "out" / "idm.json").read_text())["platforms"]["libero"]["kinds"]
+    assert set(kinds) == {"expert", "policy_early", "cross_task"} and all(k["episodes"] for k in kinds.values())
+    for k in kinds.values():
+        assert k["generated_micro_mse"] == pytest.approx(k["reference_micro_mse"], rel=0.2)
+    assert kinds["expert"]["reference_ratio_to_expert"] == 1.0
+    for name in ("libero", "aloha"):  # the packaged checkpoints load and fit the limit
+        path = idm.PACKAGED / f"idm_{name}.json"
+        assert path.stat().st_size <= idm.MAX_CHECKPOINT_BYTES and idm.load(path)["platform"] == name

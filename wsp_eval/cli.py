@@ -24,6 +24,8 @@ build-side code, and in the scoring-only install a build-side command stops with
     wsp study t1-response --release DIR --reports R [R ...] --out DIR  T1 response per magnitude, compression slope
     wsp study t2-mismatch --release DIR --reports R [R ...] --out DIR  T2 score against mismatch: Spearman ρ, deciles
     wsp study t3-sources --release DIR --reports R [R ...] --out DIR   T3 per source: late − early gap, operators' spread
+    wsp study idm-train --release DIR --platform P --out FILE        ridge inverse-dynamics model on train_<platform>
+    wsp study idm --release DIR [--submission SUB] --out DIR         IDM action error per stream kind (a baseline)
     wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
     wsp export-inputs --release DIR --out DIR                        inputs-only release (private test sets)
 """
@@ -153,6 +155,17 @@ def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
         an.add_argument("--reports", type=Path, nargs="+", required=True,
                         help="report folders (or report.json) of `wsp score` against this release, one per model")
         an.add_argument("--out", type=Path, required=True, help=f"folder for {name.replace('-', '_')}.{{json,png}}")
+    it = study.add_parser("idm-train", help="train the ridge inverse-dynamics model (flow features → action) on a "
+                                            "platform's train split: a small JSON checkpoint")
+    it.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    it.add_argument("--platform", required=True)
+    it.add_argument("--out", type=Path, required=True, help="the checkpoint file (JSON)")
+    ie = study.add_parser("idm", help="the IDM's action error on simulator references of expert, early-policy and "
+                                      "cross-task streams, and on a submission's videos (a baseline, not a score)")
+    ie.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    ie.add_argument("--checkpoint", type=Path, nargs="+", help="IDM checkpoints (default: the packaged ones)")
+    ie.add_argument("--submission", type=Path, help="also evaluate this submission's generated videos (first seed)")
+    ie.add_argument("--out", type=Path, required=True, help="folder for idm.json")
     ex = sub.add_parser("export-inputs", help="write an inputs-only release: first frames and actions, no reference")
     ex.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     ex.add_argument("--out", type=Path, required=True, help="folder of the inputs-only release")
@@ -340,6 +353,8 @@ def cmd_study(args) -> int:
 
     if args.study == "coverage" or args.study in ANALYSES:
         return run_analysis(args)
+    if args.study in ("idm", "idm-train"):
+        return run_idm(args)
 
     if args.study == "agreement":
         try:
@@ -393,6 +408,26 @@ def run_analysis(args) -> int:
         raise CliError(str(e)) from None
     print(study.markdown(result))
     print("written: " + ", ".join(str(args.out / name) for name in study.OUTPUTS))
+    return 0
+
+
+def run_idm(args) -> int:
+    """`wsp study idm-train` (a checkpoint) and `wsp study idm` (its action error)."""
+    from wsp_eval.studies import StudyError, idm
+
+    release = _release_or_error(args.release)
+    try:
+        if args.study == "idm-train":
+            checkpoint = idm.train(release, args.platform)
+            idm.save(checkpoint, args.out)
+            print(f"IDM of {args.platform}: {checkpoint['samples']} frame pairs of {checkpoint['episodes']} episodes, "
+                  f"train Micro-MSE {checkpoint['train_mse']:.4g}; written: {args.out}")
+            return 0
+        result = idm.run(release, args.checkpoint, args.out, args.submission)
+    except StudyError as e:
+        raise CliError(str(e)) from None
+    print(idm.markdown(result))
+    print("written: " + ", ".join(str(args.out / name) for name in idm.OUTPUTS))
     return 0
 
 
