@@ -1,8 +1,9 @@
-"""The paper's analyses (`wsp study coverage`, `t1-response`, `t2-mismatch`, `t3-sources`) on the shared tiny
-releases and real score reports of calibration baselines. Each command writes its JSON and figure, and its numbers
-are reproduced here by an independent computation: PCA by the eigenvectors of the covariance of motions read
-afresh from the LeRobot data, hull areas by SciPy's Qhull, Spearman's ρ by SciPy on the stored per-instance
-scores and the release's mismatch, the compression slope by `np.polyfit`, the T3 gap from the report's records.
+"""The paper's analyses (`wsp study coverage`, `t1-response`, `t2-mismatch`, `t3-sources`, `idm-train`, `idm`) on
+the shared tiny releases and real score reports of calibration baselines. Each command writes its JSON and figure,
+and its numbers are reproduced here by an independent computation: PCA by the eigenvectors of the covariance of
+motions read afresh from the LeRobot data, hull areas by SciPy's Qhull, Spearman's ρ by SciPy on the stored
+per-instance scores and the release's mismatch, the compression slope by `np.polyfit`, the T3 gap from the report's
+records, the IDM's ridge weights by an augmented least-squares solve.
 """
 
 from __future__ import annotations
@@ -189,6 +190,13 @@ def test_bad_input_is_one_line(t1_release, suites_release, suites_reports, tmp_p
     assert "not a `wsp score` report" in capsys.readouterr().err
     assert main(["study", "coverage", "--release", str(t1_release), "--out", str(tmp_path / "c")]) == 2
     assert "no T2 or T3 config" in capsys.readouterr().err
+    (tmp_path / "bad.json").write_text("{}")
+    assert main(["study", "idm", "--release", str(suites_release), "--checkpoint", str(tmp_path / "bad.json"),
+                 "--out", str(tmp_path / "i")]) == 2
+    assert "not an IDM checkpoint" in capsys.readouterr().err
+    assert main(["study", "idm-train", "--release", str(suites_release), "--platform", "maniskill",
+                 "--out", str(tmp_path / "i.json")]) == 2
+    assert "no train_maniskill split" in capsys.readouterr().err
 
 
 def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp_path, capsys):
@@ -218,6 +226,7 @@ def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp
     assert main(["study", "idm", "--release", str(libero_release), "--checkpoint", str(tmp_path / "idm1.json"),
                  "--submission", str(tmp_path / "oracle"), "--out", str(tmp_path / "out")]) == 0
     assert "Micro-MSE" in capsys.readouterr().out
+    _figure_ok(tmp_path / "out" / "idm.png")
     kinds = json.loads((tmp_path / "out" / "idm.json").read_text())["platforms"]["libero"]["kinds"]
     assert set(kinds) == {"expert", "policy_early", "cross_task"} and all(k["episodes"] for k in kinds.values())
     for k in kinds.values():

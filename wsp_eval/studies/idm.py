@@ -28,6 +28,7 @@ from wsp_eval.reference import episodes, reference_frames
 from wsp_eval.release_format import INSTANCES, format_problem, load_release, split_config
 from wsp_eval.studies import StudyError
 from wsp_eval.studies.analysis_inputs import pyplot, write_json
+from wsp_eval.video import VideoError, read_video
 
 SIZE = 64
 GRID = 4
@@ -132,18 +133,25 @@ def streams(release: Path, platform: str) -> dict[str, list[tuple[str, dict]]]:
     return out
 
 
+def first_seed(submission: Path) -> int:
+    """The first generation seed `submission.json` lists; StudyError naming the file when there is none."""
+    path = Path(submission) / "submission.json"
+    try:
+        return int(json.loads(path.read_text())["seeds"][0])
+    except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+        raise StudyError(f"{path}: not a submission's manifest with seeds ({type(e).__name__}: {e})") from None
+
+
 def evaluate(release: Path, checkpoint: dict, submission: Path | None = None) -> dict:
     """Micro-MSE per kind on the references (and, with `submission`, on its generated videos), and the ratios."""
-    from wsp_eval.video import read_video
-
     platform = checkpoint["platform"]
-    seed = None
-    if submission is not None:
-        seeds = json.loads((Path(submission) / "submission.json").read_text()).get("seeds") or [0]
-        seed = seeds[0]
+    seed = None if submission is None else first_seed(submission)
     result: dict = {"platform": platform, "kinds": {}}
+    found = streams(release, platform)
+    if not any(found.values()):
+        raise StudyError(f"{release}: no T1, T2 or T3 reference of {platform} for its IDM checkpoint to read")
     cached: dict[str, dict] = {}
-    for kind, items in streams(release, platform).items():
+    for kind, items in found.items():
         errors: dict[str, list[np.ndarray]] = {"reference": [], "generated": []}
         for config, e in items:
             config_dir = Path(release) / config
@@ -154,7 +162,10 @@ def evaluate(release: Path, checkpoint: dict, submission: Path | None = None) ->
                 path = Path(submission) / config / e["wsp.episode_id"] / f"seed{seed}.mp4"
                 if not path.is_file():
                     raise StudyError(f"{path}: missing (the IDM reads the submission's seed {seed} of every episode)")
-                x, y = pairs(read_video(path)[0], stream)
+                try:
+                    x, y = pairs(read_video(path)[0], stream)
+                except VideoError as e:
+                    raise StudyError(str(e)) from None
                 errors["generated"].append(((predict(checkpoint, x) - y) ** 2).ravel())
         result["kinds"][kind] = {"episodes": len(items), **{
             f"{side}_micro_mse": float(np.concatenate(v).mean()) if v else None for side, v in errors.items()
