@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from wsp_eval.cli import main
@@ -78,13 +79,22 @@ def test_html_sorts_in_a_browser(reports, tmp_path):
     driver = _browser()
     try:
         driver.get((out / "leaderboard.html").as_uri())
-        first = lambda: driver.find_elements(By.CSS_SELECTOR, "tbody tr")[0].find_elements(By.TAG_NAME, "td")[0].text  # noqa: E731
-        headers = driver.find_elements(By.CSS_SELECTOR, "thead th")
-        t2 = next(h for h in headers if h.text == "maniskill t2")
+        overall, suites = (driver.find_element(By.CSS_SELECTOR, f"table.{c}") for c in ("overall", "suites"))
+        assert [h.text for h in overall.find_elements(By.CSS_SELECTOR, "thead th")] == [
+            "model", "macro average", "maniskill Overall"]  # the headline first: macro, then each platform
+        assert [h.text for h in suites.find_elements(By.CSS_SELECTOR, "th.platform")] == ["maniskill"]
+
+        def first(table) -> str:
+            return table.find_elements(By.CSS_SELECTOR, "tbody tr")[0].find_elements(By.TAG_NAME, "td")[0].text
+
+        t2 = suites.find_element(By.CSS_SELECTOR, 'th[data-col="maniskill t2"]')
+        assert t2.text == "T2"  # under its platform's grouped header
         t2.click()
-        assert first() == "baseline:oracle"  # sorted by T2, best first
-        headers[0].click()
-        assert first() == "baseline:oracle"  # by name: "baseline:oracle" < "baseline:static"
+        assert first(suites) == "baseline:oracle"  # sorted by T2, best first
+        suites.find_element(By.CSS_SELECTOR, 'th[data-col="model"]').click()
+        assert first(suites) == "baseline:oracle"  # by name: "baseline:oracle" < "baseline:static"
+        overall.find_element(By.CSS_SELECTOR, 'th[data-col="macro overall"]').click()
+        assert first(overall) == "baseline:oracle"
         driver.save_screenshot(str(tmp_path / "leaderboard.png"))
     finally:
         driver.quit()
@@ -113,3 +123,45 @@ def test_report_shows_the_worst_instances(reports):
     assert all("per 2 s window" in s["evidence"] for s in by_config["t2_maniskill"])
     page = (folder / "report.html").read_text()
     assert all(f'src="{s["image"]}"' in page for s in strips) and "Worst-scoring instances" in page
+
+
+def _synthetic(model: str, scores: dict[str, dict[str, float]]) -> dict:
+    """A report of per-platform suite and Overall scores only (no instances: every rank is a tie)."""
+    platforms = {p: {"overall": {"score": s["overall"], "ci": None},
+                     "suites": {k: {"score": v, "ci": None, "config": f"{k}_{p}"} for k, v in s.items()
+                                if k != "overall"}} for p, s in scores.items()}
+    macro = float(np.mean([s["overall"] for s in scores.values()]))
+    return {"submission": {"model": model}, "platforms": platforms, "instances": [],
+            "macro_average": {"score": macro, "ci": None}, "release": {"release_json_sha256": "a" * 64}}
+
+
+def test_ranking_consistency(tmp_path):
+    """Spearman ρ per pair of platforms against SciPy's on the same scores; the note under four models."""
+    from scipy.stats import spearmanr
+
+    rng = np.random.default_rng(3)
+    platforms = ("aloha", "libero", "maniskill")
+    scores = {f"m{k}": {p: {"overall": float(rng.uniform(0, 100)), "t2": float(rng.uniform(0, 100))}
+                        for p in platforms} for k in range(5)}
+    paths = []
+    for m, s in scores.items():
+        (tmp_path / m).mkdir()
+        (tmp_path / m / "report.json").write_text(json.dumps(_synthetic(m, s)))
+        paths.append(tmp_path / m)
+    assert main(["leaderboard", *map(str, paths), "--out", str(tmp_path / "lb")]) == 0
+    c = json.loads((tmp_path / "lb" / "leaderboard.json").read_text())["main"]["consistency"]
+    assert c["note"] is None and len(c["pairs"]) == 3
+    for pair in c["pairs"]:
+        a, b = pair["platforms"]
+        for suite in ("overall", "t2"):
+            expected = spearmanr([scores[m][a][suite] for m in scores], [scores[m][b][suite] for m in scores])[0]
+            assert pair["suites"][suite]["spearman"] == pytest.approx(expected, abs=1e-12)
+            assert pair["suites"][suite]["meaningful"] and pair["suites"][suite]["models"] == 5
+    overall = [p["suites"]["overall"]["spearman"] for p in c["pairs"]]
+    assert c["mean_pairwise_overall"] == pytest.approx(np.mean(overall))
+    page = (tmp_path / "lb" / "leaderboard.html").read_text()
+    assert "Ranking consistency" in page and page.index("macro average") < page.index("Suites per platform")
+    assert main(["leaderboard", *map(str, paths[:3]), "--out", str(tmp_path / "few")]) == 0
+    few = json.loads((tmp_path / "few" / "leaderboard.json").read_text())["main"]["consistency"]
+    assert "at least 4" in few["note"] and not few["pairs"][0]["suites"]["overall"]["meaningful"]
+    assert "†" in (tmp_path / "few" / "leaderboard.md").read_text()

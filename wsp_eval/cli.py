@@ -21,6 +21,12 @@ build-side code, and in the scoring-only install a build-side command stops with
     wsp study t4-negatives --release DIR --out DIR                   T4 on objects moving without contact, and drawn blurred
     wsp rate SUB [SUB ...] --release DIR --annotator NAME --out DIR  human rating page on 127.0.0.1 (resumable)
     wsp study agreement --ratings DIR --reports REPORT [REPORT ...]  metrics against the human ratings
+    wsp study coverage --release DIR --out DIR                       PCA of expert, counterfactual, source-diverse arm motion
+    wsp study t1-response --release DIR --reports R [R ...] --out DIR  T1 response per magnitude, compression slope
+    wsp study t2-mismatch --release DIR --reports R [R ...] --out DIR  T2 score against mismatch: Spearman ρ, deciles
+    wsp study t3-sources --release DIR --reports R [R ...] --out DIR   T3 per source: late − early gap, operators' spread
+    wsp study idm-train --release DIR --platform P --out FILE        ridge inverse-dynamics model on train_<platform>
+    wsp study idm --release DIR [--submission SUB] --out DIR         IDM action error per stream kind (a baseline)
     wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
     wsp export-inputs --release DIR --out DIR                        inputs-only release (private test sets)
 """
@@ -46,6 +52,14 @@ COMMANDS: Registry[Command] = Registry("command", "worldsimprobe.commands")
 BUILD_MODULES = frozenset({"sapien", "mani_skill", "mujoco", "robosuite", "libero", "lerobot", "datasets", "torch",
                            "huggingface_hub", "gymnasium", "OpenGL", "numba", "easydict", "filelock"})
 EXTRA_OF_MODULE = {**dict.fromkeys(BUILD_MODULES, "build"), "ray": "cluster"}
+
+
+ANALYSES = {  # `wsp study NAME` of the paper's analyses that read score reports (docs/analyses.md)
+    "t1-response": "T1's relative response per perturbation magnitude, model against simulator, and the compression "
+                   "slope",
+    "t2-mismatch": "Spearman ρ between T2 instance score and receiver–donor mismatch, and the decile curve",
+    "t3-sources": "T3 per source group: the late − early policy gap and the operators' spread",
+}
 
 
 def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
@@ -110,7 +124,8 @@ def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     ca.add_argument("--baselines", nargs="+", help="default: all registered baselines")
     ca.add_argument("--seeds", type=int, nargs="+", default=[0])
     _score_options(ca)
-    st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md)")
+    st = sub.add_parser("study", help="validity studies of the evaluators (docs/validity.md) and the paper's "
+                                      "analyses (docs/analyses.md)")
     study = st.add_subparsers(dest="study", required=True)
     co = study.add_parser("corruption", help="RMFA drop under blur and texture removal, robot region vs background")
     co.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
@@ -136,6 +151,29 @@ def parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     ag.add_argument("--reports", type=Path, nargs="+", required=True, help="report folders (or report.json) of `wsp score`")
     ag.add_argument("--threshold", type=float, default=50.0, help="a score at or above it counts as positive (default 50)")
     ag.add_argument("--out", type=Path, help="also write agreement.json and agreement.md here")
+    cv = study.add_parser("coverage", help="PCA of the arm motion of expert, counterfactual (T2) and source-diverse "
+                                           "(T3) rollouts of one task per platform, with each set's spread")
+    cv.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    cv.add_argument("--out", type=Path, required=True, help="folder for coverage.{json,png}")
+    cv.add_argument("--task", nargs="+", help="the task to plot on each platform that has it (default: the task of "
+                                              "the platform's T3 config, else its first T2 task)")
+    for name, text in ANALYSES.items():
+        an = study.add_parser(name, help=text)
+        an.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+        an.add_argument("--reports", type=Path, nargs="+", required=True,
+                        help="report folders (or report.json) of `wsp score` against this release, one per model")
+        an.add_argument("--out", type=Path, required=True, help=f"folder for {name.replace('-', '_')}.{{json,png}}")
+    it = study.add_parser("idm-train", help="train the ridge inverse-dynamics model (flow features → action) on a "
+                                            "platform's train split: a small JSON checkpoint")
+    it.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    it.add_argument("--platform", required=True)
+    it.add_argument("--out", type=Path, required=True, help="the checkpoint file (JSON)")
+    ie = study.add_parser("idm", help="the IDM's action error on simulator references of expert, early-policy and "
+                                      "cross-task streams, and on a submission's videos (a baseline, not a score)")
+    ie.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
+    ie.add_argument("--checkpoint", type=Path, nargs="+", help="IDM checkpoints (default: the packaged ones)")
+    ie.add_argument("--submission", type=Path, help="also evaluate this submission's generated videos (first seed)")
+    ie.add_argument("--out", type=Path, required=True, help="folder for idm.json")
     ex = sub.add_parser("export-inputs", help="write an inputs-only release: first frames and actions, no reference")
     ex.add_argument("--release", type=Path, default=Path(DEFAULT_RELEASE_NAME))
     ex.add_argument("--out", type=Path, required=True, help="folder of the inputs-only release")
@@ -330,6 +368,11 @@ def cmd_calibrate(args) -> int:
 def cmd_study(args) -> int:
     from wsp_eval.studies import agreement, corruption
 
+    if args.study == "coverage" or args.study in ANALYSES:
+        return run_analysis(args)
+    if args.study in ("idm", "idm-train"):
+        return run_idm(args)
+
     if args.study == "agreement":
         try:
             result = agreement.agreement(agreement.load_ratings(args.ratings), agreement.load_scores(args.reports),
@@ -364,6 +407,44 @@ def cmd_study(args) -> int:
         raise CliError(str(e)) from None
     print(corruption.markdown(summary, summary["config"]))
     print(f"written: {args.out / 'corruption.md'}, {args.out / 'corruption.json'}, {args.out / 'example.png'}")
+    return 0
+
+
+def run_analysis(args) -> int:
+    """`wsp study coverage` and the ANALYSES: the study's table, and the files it wrote."""
+    import importlib
+
+    from wsp_eval.studies import StudyError
+
+    study = importlib.import_module(f"wsp_eval.studies.{args.study.replace('-', '_')}")
+    release = _release_or_error(args.release)
+    try:
+        result = (study.run(release, args.out, args.task) if args.study == "coverage"
+                  else study.run(release, args.reports, args.out))
+    except StudyError as e:
+        raise CliError(str(e)) from None
+    print(study.markdown(result))
+    print("written: " + ", ".join(str(args.out / name) for name in study.OUTPUTS))
+    return 0
+
+
+def run_idm(args) -> int:
+    """`wsp study idm-train` (a checkpoint) and `wsp study idm` (its action error)."""
+    from wsp_eval.studies import StudyError, idm
+
+    release = _release_or_error(args.release)
+    try:
+        if args.study == "idm-train":
+            checkpoint = idm.train(release, args.platform)
+            idm.save(checkpoint, args.out)
+            print(f"IDM of {args.platform}: {checkpoint['samples']} frame pairs of {checkpoint['episodes']} episodes, "
+                  f"train Micro-MSE {checkpoint['train_mse']:.4g}; written: {args.out}")
+            return 0
+        result = idm.run(release, args.checkpoint, args.out, args.submission)
+    except StudyError as e:
+        raise CliError(str(e)) from None
+    print(idm.markdown(result))
+    print("written: " + ", ".join(str(args.out / name) for name in idm.OUTPUTS))
     return 0
 
 

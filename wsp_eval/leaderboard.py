@@ -7,6 +7,14 @@ own. **Ties**: within each column the models are ranked by score, and a model wh
 just above it is not significant shares its rank ("=") — a paired bootstrap over the instances both reports
 scored (`BOOTSTRAP` resamples, seeded; T5 resampled within primitives as its score is), the difference's 95 %
 interval containing 0. Overall and macro differences resample every suite at once, as their CIs do.
+
+**Ranking consistency**: per pair of platforms, Spearman's ρ between the models' Overall scores on the two (the
+models scored on both; ρ of scores is ρ of their ranks), and per suite both platforms have; the mean over the
+pairs is the paper's "mean pairwise Spearman ρ". With fewer than `MIN_MODELS` models a ρ is recorded but marked
+not meaningful (two models give ±1, three only four values).
+
+The page reads as a leaderboard: first the macro average and each platform's Overall, then every platform's suites
+under its own header (HTML: one table, platforms as grouped column headers; Markdown: one table per platform).
 """
 
 from __future__ import annotations
@@ -20,10 +28,12 @@ import numpy as np
 
 from wsp_eval.release_format import split_config
 from wsp_eval.score import bootstrap_means
+from wsp_eval.studies.agreement import spearman
 from wsp_eval.suites import SCORERS
 
 BOOTSTRAP = 2000
 SEED = 0
+MIN_MODELS = 4  # fewer models than this make a rank correlation meaningless
 
 
 class LeaderboardError(RuntimeError):
@@ -136,9 +146,34 @@ def table(entries: list[Entry]) -> dict:
                                                              "tied_with_above": tie,
                                                              "partial": c.get("complete") is False}
     first = entries[0].report
-    return {"columns": [f"{p} {s}" for p, s in cols], "rows": rows,
-            "release": first.get("release", {}), "backends": first.get("backends", {}),
-            "benchmark_version": first.get("release", {}).get("version")}
+    t = {"columns": [f"{p} {s}" for p, s in cols], "rows": rows,
+         "release": first.get("release", {}), "backends": first.get("backends", {}),
+         "benchmark_version": first.get("release", {}).get("version")}
+    t["consistency"] = consistency(t)
+    return t
+
+
+def consistency(t: dict) -> dict:
+    """Per pair of platforms, Spearman ρ between the models' scores on them, Overall and per shared suite."""
+    cols = [c.split(" ", 1) for c in t["columns"]]
+    platforms = sorted({p for p, _ in cols if p != "macro"})
+    pairs = []
+    for i, a in enumerate(platforms):
+        for b in platforms[i + 1:]:
+            suites = [s for p, s in cols if p == a and [b, s] in cols]
+            per = {}
+            for suite in sorted(suites, key=lambda s: (s == "overall", s)):
+                both = [r["cells"] for r in t["rows"].values() if f"{a} {suite}" in r["cells"]
+                        and f"{b} {suite}" in r["cells"]]
+                rho = spearman([c[f"{a} {suite}"]["score"] for c in both], [c[f"{b} {suite}"]["score"] for c in both])
+                per[suite] = {"spearman": rho, "models": len(both), "meaningful": len(both) >= MIN_MODELS}
+            pairs.append({"platforms": [a, b], "suites": per})
+    overall = [p["suites"]["overall"]["spearman"] for p in pairs if p["suites"].get("overall", {}).get("spearman")
+               is not None]
+    n = len(t["rows"])
+    note = (None if n >= MIN_MODELS else
+            f"{n} model{'s' if n != 1 else ''}: a rank correlation needs at least {MIN_MODELS} to mean anything")
+    return {"pairs": pairs, "mean_pairwise_overall": float(np.mean(overall)) if overall else None, "note": note}
 
 
 def build(paths: list[Path]) -> dict:
@@ -178,45 +213,139 @@ def _header(t: dict) -> list[str]:
             + ", ".join(f"{r} {b['name']} ({b['version']})" for r, b in sorted(be.items()))]
 
 
+def _order(t: dict) -> list[str]:
+    """Models, best macro average first (models without one last)."""
+    return sorted(t["rows"], key=lambda m: -(t["rows"][m]["cells"].get("macro overall", {}).get("score") or -1))
+
+
+def _groups(t: dict) -> tuple[list[str], dict[str, list[str]]]:
+    """The headline columns (macro, then each platform's Overall) and, per platform, its suite columns."""
+    headline = ["macro overall"] + [c for c in t["columns"] if c.endswith(" overall") and c != "macro overall"]
+    suites: dict[str, list[str]] = {}
+    for c in t["columns"]:
+        platform, suite = c.split(" ", 1)
+        if suite != "overall":
+            suites.setdefault(platform, []).append(c)
+    return headline, suites
+
+
+def _consistency_suites(c: dict) -> list[str]:
+    return sorted({s for p in c["pairs"] for s in p["suites"]}, key=lambda s: (s != "overall", s))
+
+
+def _consistency_title(c: dict) -> str:
+    mean = c["mean_pairwise_overall"]
+    return ("Ranking consistency (Spearman ρ between the models' scores on two platforms"
+            + (f"; mean pairwise Overall ρ {mean:.3f}" if mean is not None else "") + "):")
+
+
+def _consistency_lines(c: dict) -> list[str]:
+    if not c["pairs"]:
+        return []
+    suites = _consistency_suites(c)
+    lines = [_consistency_title(c), "", "| platforms | " + " | ".join(suites) + " |", "|---|" + "---|" * len(suites)]
+    for p in c["pairs"]:
+        cells = " | ".join(_rho(p["suites"].get(s)) for s in suites)
+        lines.append(f"| {' – '.join(p['platforms'])} | {cells} |")
+    return lines + (["", f"Note: {c['note']}."] if c["note"] else [])
+
+
+def _rho(cell: dict | None) -> str:
+    if not cell or cell["spearman"] is None:
+        return "—"
+    return f"{cell['spearman']:.2f}{'' if cell['meaningful'] else '†'} ({cell['models']})"
+
+
+LEGEND = ("Cells: rank (\"=\": not significantly different from the model ranked just above, paired bootstrap), "
+          "score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored). Ranking consistency: ρ (models "
+          "compared); \"†\": fewer than 4 models, not meaningful.")
+
+
 def markdown(board: dict) -> str:
-    def one(t: dict) -> list[str]:
-        lines = _header(t) + ["", "| model | " + " | ".join(t["columns"]) + " |",
-                              "|---|" + "---|" * len(t["columns"])]
-        order = sorted(t["rows"], key=lambda m: -(t["rows"][m]["cells"].get(t["columns"][-1], {}).get("score") or -1))
-        for m in order:
-            lines.append(f"| {m} | " + " | ".join(_fmt(t["rows"][m]["cells"].get(c)) for c in t["columns"]) + " |")
+    def table(t: dict, columns: list[str], names: list[str]) -> list[str]:
+        lines = ["| model | " + " | ".join(names) + " |", "|---|" + "---|" * len(columns)]
+        for m in _order(t):
+            lines.append(f"| {m} | " + " | ".join(_fmt(t["rows"][m]["cells"].get(c)) for c in columns) + " |")
         return lines
 
-    out = ["Cells: rank (\"=\": not significantly different from the model ranked just above, paired bootstrap), "
-           "score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored).", ""] + one(board["main"])
+    def one(t: dict) -> list[str]:
+        headline, suites = _groups(t)
+        lines = _header(t) + ["", "Overall:", ""] + table(t, headline, _headline_names(headline))
+        for platform, cols in suites.items():
+            lines += ["", f"{platform}:", ""] + table(t, cols, [c.split(" ", 1)[1] for c in cols])
+        return lines + ([""] + _consistency_lines(t["consistency"]) if t["consistency"]["pairs"] else [])
+
+    out = [LEGEND, ""] + one(board["main"])
     for t in board["not_comparable"]:
         out += ["", f"Not comparable with the table above (different {', '.join(t['differs_in'])}):", ""] + one(t)
     return "\n".join(out) + "\n"
 
 
+def _th(label: str, col: str, attrs: str = "") -> str:
+    """A sortable header cell of column `col`."""
+    return f"<th data-col=\"{escape(col)}\" onclick=\"sortBy(this)\"{attrs}>{escape(label)}</th>"
+
+
+def _body(t: dict, columns: list[str]) -> str:
+    rows = []
+    for m in _order(t):
+        cells = "".join(f"<td data-col=\"{escape(col)}\" data-v=\"{c['score'] if c else -1}\">{escape(_fmt(c))}</td>"
+                        for col, c in ((col, t["rows"][m]["cells"].get(col)) for col in columns))
+        rows.append(f"<tr><td data-col=\"model\" data-v=\"{escape(m)}\">{escape(m)}</td>{cells}</tr>")
+    return f"<tbody>{''.join(rows)}</tbody>"
+
+
+def _headline_names(headline: list[str]) -> list[str]:
+    return ["macro average" if c == "macro overall" else c.replace(" overall", " Overall") for c in headline]
+
+
+def _html_overall(t: dict, headline: list[str]) -> str:
+    names = _headline_names(headline)
+    head = _th("model", "model") + "".join(_th(n, c) for n, c in zip(names, headline))
+    return f"<table class=\"overall\"><thead><tr>{head}</tr></thead>{_body(t, headline)}</table>"
+
+
+def _html_suites(t: dict, suites: dict[str, list[str]]) -> str:
+    cols = [c for cs in suites.values() for c in cs]
+    if not cols:
+        return ""
+    groups = "".join(f"<th colspan=\"{len(cs)}\" class=\"platform\">{escape(p)}</th>" for p, cs in suites.items())
+    names = "".join(_th(c.split(" ", 1)[1].upper(), c) for c in cols)
+    return (f"<h2>Suites per platform</h2><table class=\"suites\"><thead><tr>{_th('model', 'model', ' rowspan=\"2\"')}"
+            f"{groups}</tr><tr>{names}</tr></thead>{_body(t, cols)}</table>")
+
+
+def _html_consistency(c: dict) -> str:
+    if not c["pairs"]:
+        return ""
+    suites = _consistency_suites(c)
+    rows = "".join(f"<tr><td>{escape(' – '.join(p['platforms']))}</td>"
+                   + "".join(f"<td>{escape(_rho(p['suites'].get(s)))}</td>" for s in suites) + "</tr>"
+                   for p in c["pairs"])
+    note = f"<p class=\"note\">Note: {escape(c['note'])}.</p>" if c["note"] else ""
+    return (f"<h2>Ranking consistency</h2><p>{escape(_consistency_title(c))}</p><table class=\"consistency\"><thead>"
+            "<tr><th>platforms</th>" + "".join(f"<th>{escape(s)}</th>" for s in suites)
+            + f"</tr></thead><tbody>{rows}</tbody></table>{note}")
+
+
 def html(board: dict) -> str:
     def one(t: dict) -> str:
-        head = "".join(f"<th onclick=\"sortBy(this)\">{escape(c)}</th>" for c in ["model"] + t["columns"])
-        body = []
-        for m, row in t["rows"].items():
-            cells = "".join(f"<td data-v=\"{c['score'] if c else -1}\">{escape(_fmt(c))}</td>"
-                            for c in (row["cells"].get(col) for col in t["columns"]))
-            body.append(f"<tr><td data-v=\"{escape(m)}\">{escape(m)}</td>{cells}</tr>")
-        return (f"<p>{escape(_header(t)[0])}</p><table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}"
-                "</tbody></table>")
+        headline, suites = _groups(t)
+        return (f"<p>{escape(_header(t)[0])}</p>{_html_overall(t, headline)}{_html_suites(t, suites)}"
+                f"{_html_consistency(t['consistency'])}")
 
     parts = [one(board["main"])] + [f"<h2>Not comparable (different {escape(', '.join(t['differs_in']))})</h2>"
                                    + one(t) for t in board["not_comparable"]]
     return ("<!doctype html><html><head><meta charset=\"utf-8\"><title>WorldSimProbe leaderboard</title><style>"
-            "body{font-family:system-ui,sans-serif;margin:1.5em}table{border-collapse:collapse}"
-            "th,td{border:1px solid #ccc;padding:.3em .6em;text-align:right;white-space:nowrap}th{cursor:pointer;background:#f3f3f3}"
+            "body{font-family:system-ui,sans-serif;margin:1.5em}table{border-collapse:collapse;margin-bottom:1em}"
+            "th,td{border:1px solid #ccc;padding:.3em .6em;text-align:right;white-space:nowrap}"
+            "th{cursor:pointer;background:#f3f3f3}th.platform{text-align:center;cursor:default;background:#e6e9f5}"
             "td:first-child{text-align:left}</style></head><body><h1>WorldSimProbe leaderboard</h1>"
-            "<p>Click a column to sort. Cells: rank (\"=\": not significantly different from the model ranked just "
-            "above, paired bootstrap), score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored).</p>"
-            + "".join(parts) +
-            "<script>function sortBy(th){const t=th.closest('table'),i=[...th.parentNode.children].indexOf(th),"
-            "b=t.tBodies[0],r=[...b.rows],num=i>0;r.sort((x,y)=>{const a=x.cells[i].dataset.v,c=y.cells[i].dataset.v;"
-            "return num?(+c)-(+a):a.localeCompare(c)});r.forEach(x=>b.appendChild(x));}</script></body></html>\n")
+            f"<p>Click a column to sort. {escape(LEGEND)}</p>" + "".join(parts) +
+            "<script>function sortBy(th){const t=th.closest('table'),col=th.dataset.col,b=t.tBodies[0],r=[...b.rows],"
+            "num=col!=='model',v=x=>x.querySelector('td[data-col=\"'+col+'\"]').dataset.v;"
+            "r.sort((x,y)=>num?(+v(y))-(+v(x)):v(x).localeCompare(v(y)));r.forEach(x=>b.appendChild(x));}"
+            "</script></body></html>\n")
 
 
 def write(board: dict, out: Path) -> None:

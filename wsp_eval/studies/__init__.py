@@ -1,5 +1,6 @@
 """Validity studies of the evaluators (docs/validity.md): they read a release and score references, or stand-ins
-made from them, as a submission's videos are scored."""
+made from them, as a submission's videos are scored. Beside them, the paper's analyses (docs/analyses.md:
+`coverage`, `t1_response`, `t2_mismatch`, `t3_sources`), which read a release and score reports of it."""
 
 from __future__ import annotations
 

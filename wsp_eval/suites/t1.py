@@ -24,11 +24,20 @@ def calibration(r: float, r_star: float) -> float:
     return float(np.clip(s, 0.0, 1.0))
 
 
-def ratio(videos: dict[str, tuple[np.ndarray, float]]) -> float | None:
-    """r = D(ĝ⁰, ĝˢ) / D(ĝ⁰, ĝˡ) for one seed; None when D(ĝ⁰, ĝˡ) = 0 (the large perturbation left no trace)."""
+def distances(videos: dict[str, tuple[np.ndarray, float]]) -> tuple[float, float]:
+    """(D(ĝ⁰, ĝˢ), D(ĝ⁰, ĝˡ)) for one seed: the generated response to each perturbation."""
     (g0, f0), (gs, fs), (gl, fl) = (videos[r] for r in ROLES)
-    d_ol = aligned_mse(g0, gl, f0, fl)
-    return None if d_ol == 0 else aligned_mse(g0, gs, f0, fs) / d_ol
+    return aligned_mse(g0, gs, f0, fs), aligned_mse(g0, gl, f0, fl)
+
+
+def ratio_of(d_os: float, d_ol: float) -> float | None:
+    """r = D⁰ˢ / D⁰ˡ; None when D⁰ˡ = 0 (the large perturbation left no trace)."""
+    return None if d_ol == 0 else d_os / d_ol
+
+
+def ratio(videos: dict[str, tuple[np.ndarray, float]]) -> float | None:
+    """r = D(ĝ⁰, ĝˢ) / D(ĝ⁰, ĝˡ) for one seed (`ratio_of`)."""
+    return ratio_of(*distances(videos))
 
 
 def ratio_score(r: float | None, r_star: float) -> float:
@@ -51,9 +60,11 @@ def prepare(ref, backends) -> float:
 
 
 def score_seed(r_star: float, videos, backends) -> tuple[float, dict]:
-    """The engine's interface: S on the 0–100 scale of the suite score, with r and r* (the report's evidence)."""
-    r = ratio(videos)
-    return 100.0 * ratio_score(r, r_star), {"r": r, "r_star": r_star}
+    """The engine's interface: S on the 0–100 scale of the suite score, with r, r* and the generated distances
+    D(ĝ⁰, ĝˢ), D(ĝ⁰, ĝˡ) (the report's evidence; `wsp study t1-response` reads them)."""
+    d_os, d_ol = distances(videos)
+    r = ratio_of(d_os, d_ol)
+    return 100.0 * ratio_score(r, r_star), {"r": r, "r_star": r_star, "d_os": d_os, "d_ol": d_ol}
 
 
 def groups(rows: list[dict]) -> list[str]:
