@@ -120,6 +120,6 @@ def libero_release(shared_root) -> Path:
 @pytest.fixture(scope="session")
 def aloha_release(shared_root) -> Path:
     """One real ALOHA release over ALOHA_TASKS (a two-arm hand-over, a one-arm lift): T1 (2 triplets), T2 (2
-    cross-task replays), T4 (one per kind, on the hand-over), T5 (one per primitive, on the hand-over), train
+    cross-task replays), T4 (one per kind, on the hand-over), T5 (one per primitive, over ALOHA_T5_TASKS), train
     (2)."""
     return shared_release("aloha", shared_root)
