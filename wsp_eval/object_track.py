@@ -59,13 +59,12 @@ X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response
 
 class Template(NamedTuple):
     """The reference object at one sample: its bounding box origin (x, y), colours (h, w, 3) float32, mask (h, w)
-    uint8, its visible pixels' centroid (x, y) in the frame, and its projected position p* (x, y)."""
+    uint8, and its visible pixels' centroid (x, y) in the frame."""
 
     origin: tuple[int, int]
     pixels: np.ndarray
     mask: np.ndarray
     centre: np.ndarray
-    anchor: np.ndarray
 
 
 class ObjectTrack(NamedTuple):
@@ -184,7 +183,7 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
         ys, xs = np.nonzero(visible)
         y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
         out.append(Template((int(x0), int(y0)), frame[y0:y1, x0:x1],
-                            visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()]), points[i]))
+                            visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
     used = [k for k, t in enumerate(out) if t is not None]
     turns = []
     if used:
@@ -208,8 +207,7 @@ def turned(t: Template) -> list[Template]:
         m[:, 2] += (side - 1) / 2 - centre_in  # the centroid lands at the canvas centre
         pixels = cv2.warpAffine(t.pixels, m, (side, side), flags=cv2.INTER_LINEAR)
         mask = cv2.warpAffine(t.mask, m, (side, side), flags=cv2.INTER_NEAREST)
-        centre = np.array([(side - 1) / 2, (side - 1) / 2])
-        out.append(Template((0, 0), pixels, mask, centre, centre))
+        out.append(Template((0, 0), pixels, mask, np.array([(side - 1) / 2, (side - 1) / 2])))
     return out
 
 
@@ -293,9 +291,9 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
     for k in used:
         frame, t = frames[frame_idx[k]], track.templates[k]
         centroid = locate(smoothed(frame), t, track.region)
-        found.append(centroid + (t.anchor - t.centre))
+        found.append(centroid + (track.points[k] - t.centre))
         turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, centroid) if by_turn else 0.0)
-    return Positions(np.array(found), np.array([track.templates[k].anchor for k in used]), np.array(turn),
+    return Positions(np.array(found), track.points[used], np.array(turn),
                      quarter_turn(track.angles[: len(used)] - track.angles[0]) if by_turn else np.zeros(len(used)),
                      used, track.size[0] / 128)
 

@@ -10,7 +10,7 @@ import pyarrow.parquet as pq
 
 from wsp_eval.integrity import sha256
 from wsp_eval.release_format import INSTANCES, RELEASE_JSON, split_config
-from wsp_eval.studies import StudyError
+from wsp_eval.studies import StudyError, suite_configs
 
 
 def load_report(path: Path) -> dict:
@@ -75,3 +75,19 @@ def write_json(out: Path, name: str, result: dict) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     (out / name).write_text(json.dumps(result, indent=1))
     return out / name
+
+
+def config_records(release: Path, reports: list[Path], suite: str):
+    """(config, report, the report's records of config, the config's instance rows) for every `suite` config of
+    `release` and every report (`load_reports`) holding records of it; a record of an instance the release lacks is
+    refused. The release's configs are checked before the reports are read."""
+    configs = suite_configs(release, suite)
+    loaded = load_reports(reports, release)
+    for config in configs:
+        rows = instance_rows(release, config)
+        for report in loaded:
+            recs = records(report, suite).get(config, [])
+            if missing := [r["instance_id"] for r in recs if r["instance_id"] not in rows]:
+                raise StudyError(f"{report['path']}: {missing[0]} is not in {release / config}")
+            if recs:
+                yield config, report, recs, rows

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_eval.studies import StudyError, suite_configs
+from wsp_eval.studies import StudyError
 from wsp_eval.studies.agreement import spearman
-from wsp_eval.studies.analysis_inputs import instance_rows, load_reports, model, pyplot, records, write_json
+from wsp_eval.studies.analysis_inputs import config_records, model, pyplot, write_json
 from wsp_eval.studies.stats import bootstrap_ci, mean_ci
 from wsp_eval.suites import t2
 
@@ -39,17 +39,9 @@ def analyse(recs: list[dict], rows: dict[str, dict]) -> dict:
 
 def run(release: Path, reports: list[Path], out: Path) -> dict:
     """Every report's ρ and decile curve per T2 config of the release; writes OUTPUTS into `out`."""
-    configs = suite_configs(release, "t2")
     result: dict = {"release": str(release), "configs": {}}
-    loaded = load_reports(reports, release)
-    for config in configs:
-        rows = instance_rows(release, config)
-        for report in loaded:
-            recs = records(report, "t2").get(config, [])
-            if missing := [r["instance_id"] for r in recs if r["instance_id"] not in rows]:
-                raise StudyError(f"{report['path']}: {missing[0]} is not in {release / config}")
-            if recs:
-                result["configs"].setdefault(config, {"models": {}})["models"][model(report)] = analyse(recs, rows)
+    for config, report, recs, rows in config_records(release, reports, "t2"):
+        result["configs"].setdefault(config, {"models": {}})["models"][model(report)] = analyse(recs, rows)
     if not result["configs"]:
         raise StudyError(f"no report given holds a T2 instance of {release}")
     for entry in result["configs"].values():

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_eval.studies import StudyError, suite_configs
-from wsp_eval.studies.analysis_inputs import instance_rows, load_reports, model, pyplot, records, write_json
+from wsp_eval.studies import StudyError
+from wsp_eval.studies.analysis_inputs import config_records, model, pyplot, write_json
 from wsp_eval.studies.stats import grouped_bootstrap_ci, mean_ci
 
 OUTPUTS = ("t3_sources.json", "t3_sources.png")
@@ -56,17 +56,9 @@ def _order(group: str) -> int:
 
 def run(release: Path, reports: list[Path], out: Path) -> dict:
     """Every report's source-group analysis per T3 config of the release; writes OUTPUTS into `out`."""
-    configs = suite_configs(release, "t3")
     result: dict = {"release": str(release), "configs": {}}
-    loaded = load_reports(reports, release)
-    for config in configs:
-        rows = instance_rows(release, config)
-        for report in loaded:
-            recs = records(report, "t3").get(config, [])
-            if missing := [r["instance_id"] for r in recs if r["instance_id"] not in rows]:
-                raise StudyError(f"{report['path']}: {missing[0]} is not in {release / config}")
-            if recs:
-                result["configs"].setdefault(config, {})[model(report)] = analyse(recs, rows)
+    for config, report, recs, rows in config_records(release, reports, "t3"):
+        result["configs"].setdefault(config, {})[model(report)] = analyse(recs, rows)
     if not result["configs"]:
         raise StudyError(f"no report given holds a T3 instance of {release}")
     write_json(out, OUTPUTS[0], result)
