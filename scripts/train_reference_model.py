@@ -46,6 +46,9 @@ def main() -> int:
     ap.add_argument("--steps", type=int, help="training steps (default: the platform's recipe)")
     ap.add_argument("--workers", type=int, default=2, help="build workers")
     ap.add_argument("--no-install", action="store_true", help="do not copy the checkpoint into the package")
+    ap.add_argument("--snapshots", type=int, nargs="+", default=[],
+                    help="also keep the weights after these steps (multiples of 250), in WORK/step<N>/ "
+                         "(scripts/known_ordering.py); the run itself is unchanged")
     args = ap.parse_args()
     release, config = args.work / "release", f"train_{args.platform}"
     split = SPLIT[args.platform]
@@ -58,7 +61,7 @@ def main() -> int:
     recipe = RECIPE[args.platform]
     if args.steps:
         recipe = Recipe(**{**recipe.__dict__, "steps": args.steps})
-    ckpt = train(release, config, args.work, recipe)
+    ckpt = train(release, config, args.work, recipe, snapshots=args.snapshots)
     plot_history(ckpt.with_suffix(".history.json"), ckpt.with_suffix(".loss.png"))
     if not args.no_install:
         CHECKPOINTS.mkdir(exist_ok=True)

@@ -1,9 +1,10 @@
-"""The paper's analyses (`wsp study coverage`, `t1-response`, `t2-mismatch`, `t3-sources`, `idm-train`, `idm`) on
-the shared tiny releases and real score reports of calibration baselines. Each command writes its JSON and figure,
-and its numbers are reproduced here by an independent computation: PCA by the eigenvectors of the covariance of
-motions read afresh from the LeRobot data, hull areas by SciPy's Qhull, Spearman's ρ by SciPy on the stored
-per-instance scores and the release's mismatch, the compression slope by `np.polyfit`, the T3 gap from the report's
-records, the IDM's ridge weights by an augmented least-squares solve.
+"""The paper's analyses (`wsp study coverage`, `t1-response`, `t2-mismatch`, `t3-sources`, `ordering`,
+`idm-train`, `idm`) on the shared tiny releases and real score reports of calibration baselines. Each command writes
+its JSON and figure, and its numbers are reproduced here by an independent computation: PCA by the eigenvectors of
+the covariance of motions read afresh from the LeRobot data, hull areas by SciPy's Qhull, Spearman's ρ by SciPy on
+the stored per-instance scores and the release's mismatch, Kendall's τ by SciPy on the reports' own suite scores, the
+compression slope by `np.polyfit`, the T3 gap from the report's records, the IDM's ridge weights by an augmented
+least-squares solve.
 """
 
 from __future__ import annotations
@@ -15,10 +16,12 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 from scipy.spatial import ConvexHull
-from scipy.stats import spearmanr
+from scipy.stats import kendalltau, spearmanr
 
 from wsp_eval.baselines import write_baseline
 from wsp_eval.cli import main
+from wsp_eval.studies.ordering import SuiteScores
+from wsp_eval.suites import SCORERS
 
 
 def _reports(release, root, names) -> dict:
@@ -131,6 +134,51 @@ def test_t1_response(t1_release, t1_reports, tmp_path, capsys):
     assert oracle["slope"] == pytest.approx(1.0, abs=0.02)  # the references respond as the simulator does
     assert noise["slope"] < 0.5 and noise["ci"][1] < oracle["ci"][0]  # added noise compresses the response
     assert static["slope"] == 0.0  # no response at all
+
+
+def test_ordering(t1_release, t1_reports, tmp_path, capsys):
+    """Known order static < noise < oracle on T1: τ by SciPy on the reports' own suite scores, the CI around it."""
+    ordered = [t1_reports[n] for n in ("static", "noise", "oracle")]
+    assert main(["study", "ordering", "--release", str(t1_release), "--reports", *map(str, ordered),
+                 "--out", str(tmp_path)]) == 0
+    assert "Kendall τ" in capsys.readouterr().out
+    _figure_ok(tmp_path / "ordering.png")
+    result = json.loads((tmp_path / "ordering.json").read_text())
+    assert result["models"] == ["baseline:static", "baseline:noise", "baseline:oracle"]
+    t1 = result["platforms"]["maniskill"]["suites"]["t1"]
+    own = [json.loads((f / "report.json").read_text())["platforms"]["maniskill"]["suites"]["t1"]["score"]
+           for f in ordered]
+    assert t1["scores"] == pytest.approx(own)
+    assert t1["kendall_tau"] == pytest.approx(kendalltau([0, 1, 2], own).statistic)
+    assert t1["in_order"] == bool(own[0] < own[1] < own[2])
+    lo, hi = t1["kendall_tau_ci"]
+    assert -1 <= lo <= t1["kendall_tau"] <= hi <= 1
+    assert result["platforms"]["maniskill"]["overall"]["scores"] == pytest.approx(own)  # one suite: Overall is T1
+    reversed_ = [str(f) for f in reversed(ordered)]
+    assert main(["study", "ordering", "--release", str(t1_release), "--reports", *reversed_,
+                 "--out", str(tmp_path / "r")]) == 0
+    back = json.loads((tmp_path / "r" / "ordering.json").read_text())["platforms"]["maniskill"]["suites"]["t1"]
+    assert back["kendall_tau"] == pytest.approx(-t1["kendall_tau"])
+    assert main(["study", "ordering", "--release", str(t1_release), "--reports", *reversed_[:2],
+                 "--out", str(tmp_path / "two")]) == 2
+    assert "at least three reports" in capsys.readouterr().err
+
+
+def test_ordering_scores_t5_as_the_report_does(suites_release, suites_reports):
+    """The study's suite score of a draw is the report's: within primitive first on T5, the plain mean elsewhere."""
+    for suite in ("t2", "t5"):
+        reports = [json.loads((f / "report.json").read_text()) for f in suites_reports.values()]
+        recs = [sorted(_records(f, suite), key=lambda r: r["instance_id"]) for f in suites_reports.values()]
+        ids = [r["instance_id"] for r in recs[0]]
+        rows = _rows(suites_release, f"{suite}_maniskill")
+        scores = SuiteScores(suite, np.array([[r["score"] for r in rs] for rs in recs]),
+                             SCORERS[suite].groups([rows[i] for i in ids]))
+        assert scores.score() == pytest.approx([r["platforms"]["maniskill"]["suites"][suite]["score"]
+                                                for r in reports])
+        draw = scores.draw(np.random.default_rng(0))
+        if suite == "t5":  # resampled within primitive: every primitive keeps its count
+            groups = SCORERS[suite].groups([rows[i] for i in ids])
+            assert sorted(groups[k] for k in draw) == sorted(groups)
 
 
 def test_t2_mismatch(suites_release, suites_reports, tmp_path):

@@ -1,6 +1,7 @@
-"""The reference world model (`wsp_models.reference`): training is deterministic and resumes to the same weights;
-the shipped checkpoints generate through `wsp generate --model reference` a submission that validates, is the
-same for every run and seed, and answers actions (T1 above the static baseline's 0)."""
+"""The reference world model (`wsp_models.reference`): training is deterministic, resumes to the same weights and
+keeps snapshots without changing the run; the shipped checkpoints generate through `wsp generate --model
+reference` a submission that validates, is the same for every run and seed, and answers actions (T1 above the
+static baseline's 0)."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from wsp_models.reference import train as train_mod  # noqa: E402
-from wsp_models.reference.model import CHECKPOINTS  # noqa: E402
+from wsp_models.reference.model import CHECKPOINTS, ReferenceModel  # noqa: E402
 
 WSP = str(Path(sys.executable).with_name("wsp"))
 TINY = train_mod.Recipe(steps=4, batch=2, threads=1, size=64)
@@ -33,8 +34,14 @@ def test_training_is_deterministic_and_resumes(libero_release, tmp_path, monkeyp
     monkeypatch.setattr(train_mod, "SAVE_EVERY", 2)
     monkeypatch.setattr(train_mod, "VAL_EVERY", 2)
     first = _weights(train_mod.train(libero_release, "train_libero", tmp_path / "a", TINY, progress=False))
-    second = _weights(train_mod.train(libero_release, "train_libero", tmp_path / "b", TINY, progress=False))
-    assert _same(first, second)
+    second = _weights(train_mod.train(libero_release, "train_libero", tmp_path / "b", TINY, progress=False,
+                                      snapshots=(2,)))
+    assert _same(first, second)  # keeping a snapshot does not change the run
+    snapshot = torch.load(tmp_path / "b" / "step2" / "libero.pt", weights_only=False)
+    assert snapshot["record"]["step"] == 2 and not _same(snapshot["state_dict"], first)
+    assert ReferenceModel(tmp_path / "b" / "step2", threads=1).wsp_info["reference_model"]["libero"]["steps"] == 2
+    with pytest.raises(ValueError, match="multiple of 2"):
+        train_mod.train(libero_release, "train_libero", tmp_path / "d", TINY, progress=False, snapshots=(3,))
 
     calls = 0
     real = train_mod._sample

@@ -25,6 +25,7 @@ build-side code, and in the scoring-only install a build-side command stops with
     wsp study t1-response --release DIR --reports R [R ...] --out DIR  T1 response per magnitude, compression slope
     wsp study t2-mismatch --release DIR --reports R [R ...] --out DIR  T2 score against mismatch: Spearman ρ, deciles
     wsp study t3-sources --release DIR --reports R [R ...] --out DIR   T3 per source: late − early gap, operators' spread
+    wsp study ordering --release DIR --reports R [R ...] --out DIR     Kendall τ of the suites against a known order
     wsp study idm-train --release DIR --platform P --out FILE        ridge inverse-dynamics model on train_<platform>
     wsp study idm --release DIR [--submission SUB] --out DIR         IDM action error per stream kind (a baseline)
     wsp leaderboard REPORT [REPORT ...] --out DIR                    models × suites with CIs and ties
@@ -59,6 +60,8 @@ ANALYSES = {  # `wsp study NAME` of the paper's analyses that read score reports
                    "slope",
     "t2-mismatch": "Spearman ρ between T2 instance score and receiver–donor mismatch, and the decile curve",
     "t3-sources": "T3 per source group: the late − early policy gap and the operators' spread",
+    "ordering": "Kendall τ per suite between the reports' known order (worst first: e.g. checkpoints by training "
+                "step) and their scores",
 }
 
 

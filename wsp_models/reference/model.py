@@ -72,4 +72,5 @@ class ReferenceModel:
 def _summary(record: dict) -> dict:
     """What submission.json says of one checkpoint: its training record's identifying fields."""
     keys = ("format", "parameters", "torch", "train_seconds", "hardware")
-    return {**{k: record[k] for k in keys}, "data_sha256": record["data"]["sha256"], "steps": record["recipe"]["steps"]}
+    return {**{k: record[k] for k in keys}, "data_sha256": record["data"]["sha256"],
+            "steps": record.get("step", record["recipe"]["steps"])}

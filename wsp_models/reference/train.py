@@ -1,5 +1,7 @@
 """Train the reference world model on a `train_<platform>` split: deterministic (fixed seed, fixed thread count,
-torch's deterministic algorithms), resumable (a training state every `SAVE_EVERY` steps), with a loss history.
+torch's deterministic algorithms), resumable (a training state every `SAVE_EVERY` steps), with a loss history,
+and optional snapshots: the weights at chosen steps of the same run (the known-ordering check of
+`scripts/known_ordering.py`), which do not change the run.
 
 Each step draws `batch` (episode, frame t ≥ 1) pairs uniformly from the training episodes and regresses frame t
 from frame 0 and the action features of t (`network.condition`) with an L1 loss weighted `1 + CHANGED_WEIGHT`
@@ -12,6 +14,7 @@ import json
 import os
 import platform
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,10 +66,15 @@ def weighted_l1(pred: torch.Tensor, target: torch.Tensor, frame0: torch.Tensor) 
     return ((pred - target).abs() * (1 + CHANGED_WEIGHT * changed)).mean()
 
 
-def train(release: Path, config: str, out: Path, recipe: Recipe = Recipe(), progress: bool = True) -> Path:
+def train(release: Path, config: str, out: Path, recipe: Recipe = Recipe(), progress: bool = True,
+          snapshots: Sequence[int] = ()) -> Path:
     """Train on `release/config`; write `out/<platform>.pt` (weights and everything needed to run them) and
-    `out/<platform>.history.json`; resume from `out/.train_state.pt` when it holds a run of the same recipe.
+    `out/<platform>.history.json`, and the same two files in `out/step<N>/` at every step N of `snapshots`
+    below `recipe.steps`; resume from `out/.train_state.pt` when it holds a run of the same recipe.
     Returns the checkpoint's path."""
+    if bad := [n for n in snapshots if not 0 < n < recipe.steps or n % VAL_EVERY]:
+        raise ValueError(f"snapshot step {bad[0]}: must be a multiple of {VAL_EVERY} (a validation loss) below the "
+                         f"run's {recipe.steps} steps")
     torch.manual_seed(recipe.seed)
     torch.set_num_threads(recipe.threads)
     torch.use_deterministic_algorithms(True)
@@ -114,6 +122,8 @@ def train(release: Path, config: str, out: Path, recipe: Recipe = Recipe(), prog
                 running = []
             if step % VAL_EVERY == 0 or step == recipe.steps:
                 history["val"].append([step, _val_loss(net, val)])
+            if step in snapshots:
+                _write_checkpoint(out / f"step{step}", config, net, mean, std, facts, recipe, history, seconds, step)
             if step % SAVE_EVERY == 0 and step < recipe.steps:
                 tmp = state_path.with_suffix(".partial")
                 torch.save({"key": key, "net": net.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
@@ -121,16 +131,27 @@ def train(release: Path, config: str, out: Path, recipe: Recipe = Recipe(), prog
                             "step": step, "seconds": seconds}, tmp)
                 os.replace(tmp, state_path)
             bar.update()
+    ckpt = _write_checkpoint(out, config, net, mean, std, facts, recipe, history, seconds, step)
+    state_path.unlink(missing_ok=True)
+    return ckpt
+
+
+def _write_checkpoint(folder: Path, config: str, net: ReferenceNet, mean: np.ndarray, std: np.ndarray, facts: dict,
+                      recipe: Recipe, history: dict, seconds: float, step: int) -> Path:
+    """`folder/<platform>.pt` and its `.history.json` of the weights after `step` steps (a snapshot's record says
+    its `step`; the history is the run's so far)."""
     platform_name = config.removeprefix("train_")
     record = {"format": FORMAT, "platform": platform_name, "data": facts, "recipe": recipe.__dict__,
-              "net": cfg.as_dict(), "parameters": sum(p.numel() for p in net.parameters()),
+              "net": net.cfg.as_dict(), "parameters": sum(p.numel() for p in net.parameters()),
               "train_seconds": round(seconds, 1), "torch": torch.__version__,
               "hardware": f"{platform.processor() or platform.machine()}, {recipe.threads} threads",
               "final_val_loss": history["val"][-1][1]}
-    ckpt = out / f"{platform_name}.pt"
+    if step != recipe.steps:
+        record["step"] = step
+    folder.mkdir(parents=True, exist_ok=True)
+    ckpt = folder / f"{platform_name}.pt"
     torch.save({"record": record, "state_dict": net.state_dict(), "feature_mean": mean, "feature_std": std}, ckpt)
-    (out / f"{platform_name}.history.json").write_text(json.dumps({"record": record, **history}, indent=1))
-    state_path.unlink(missing_ok=True)
+    (folder / f"{platform_name}.history.json").write_text(json.dumps({"record": record, **history}, indent=1))
     return ckpt
 
 
