@@ -19,22 +19,17 @@ import argparse
 import sys
 from pathlib import Path
 
-import torch
-
 from wsp_eval.generate import generate
 from wsp_eval.score import score_submission
 from wsp_eval.studies import ordering
 from wsp_models.reference.model import ReferenceModel
 
 
-def name_of(folder: Path) -> str:
-    """`reference@<steps>` of the checkpoints in `folder` (every platform's must agree)."""
-    steps = set()
-    for path in sorted(folder.glob("[!.]*.pt")):
-        record = torch.load(path, map_location="cpu", weights_only=False)["record"]
-        steps.add(record.get("step", record["recipe"]["steps"]))
+def name_of(model: ReferenceModel, folder: Path) -> str:
+    """`reference@<steps>` of `model`, loaded from `folder` (every platform's checkpoint must agree)."""
+    steps = {summary["steps"] for summary in model.wsp_info["reference_model"].values()}
     if len(steps) != 1:
-        sys.exit(f"{folder}: expected reference-model checkpoints of one step count, found {sorted(steps) or 'none'}")
+        sys.exit(f"{folder}: expected reference-model checkpoints of one step count, found {sorted(steps)}")
     return f"reference@{steps.pop()}"
 
 
@@ -49,12 +44,13 @@ def main() -> int:
     ap.add_argument("--configs", nargs="+", help="only these configs (default: every scored config)")
     ap.add_argument("--workers", type=int, default=2, help="scoring workers")
     args = ap.parse_args()
-    names = [name_of(f) for f in args.checkpoints]
+    models = [ReferenceModel(f) for f in args.checkpoints]  # each folder checked before any work
+    names = [name_of(m, f) for m, f in zip(models, args.checkpoints)]
     reports = []
-    for folder, name in zip(args.checkpoints, names):
+    for model, name in zip(models, names):
         print(f"[ordering] {name}: generate and score", flush=True)
         sub = args.out / name
-        generate(ReferenceModel(folder), args.release, sub, seeds=args.seeds, configs=args.configs, name=name)
+        generate(model, args.release, sub, seeds=args.seeds, configs=args.configs, name=name)
         score_submission(sub, args.release, args.out / "reports" / name, workers=args.workers)
         reports.append(args.out / "reports" / name)
     result = ordering.run(args.release, reports, args.out)

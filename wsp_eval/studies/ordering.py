@@ -81,13 +81,13 @@ def run(release: Path, reports: list[Path], out: Path) -> dict:
         suite, platform = split_config(config)
         common = sorted(set.intersection(*({r["instance_id"] for r in recs} for recs, _ in by_model.values())))
         rows = next(iter(by_model.values()))[1]
-        scores = np.array([[{r["instance_id"]: r["score"] for r in by_model[m][0]}[i] for i in common] for m in names])
+        by_id = {m: {r["instance_id"]: r["score"] for r in by_model[m][0]} for m in names}
+        scores = np.array([[by_id[m][i] for i in common] for m in names])
         suite_scores = SuiteScores(suite, scores, SCORERS[suite].groups([rows[i] for i in common]))
-        draws = [suite_scores.draw(rng) for _ in range(BOOTSTRAP)]
-        entry = tau_entry(order, suite_scores.score(), [suite_scores.score(d) for d in draws])
+        samples = np.array([suite_scores.score(suite_scores.draw(rng)) for _ in range(BOOTSTRAP)])
         p = result["platforms"].setdefault(platform, {"suites": {}, "samples": {}})
-        p["suites"][suite] = {"config": config, "n": len(common), **entry}
-        p["samples"][suite] = np.array([suite_scores.score(d) for d in draws])
+        p["suites"][suite] = {"config": config, "n": len(common), **tau_entry(order, suite_scores.score(), samples)}
+        p["samples"][suite] = samples
     if not result["platforms"]:
         raise StudyError(f"no config of {release} is scored by every report given")
     for p in result["platforms"].values():
