@@ -19,7 +19,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from wsp_eval.generate import generate
+from wsp_eval.generate import GenerateError, generate
 from wsp_eval.score import score_submission
 from wsp_eval.studies import ordering
 from wsp_models.reference.model import ReferenceModel
@@ -44,7 +44,10 @@ def main() -> int:
     ap.add_argument("--configs", nargs="+", help="only these configs (default: every scored config)")
     ap.add_argument("--workers", type=int, default=2, help="scoring workers")
     args = ap.parse_args()
-    models = [ReferenceModel(f) for f in args.checkpoints]  # each folder checked before any work
+    try:
+        models = [ReferenceModel(f) for f in args.checkpoints]  # each folder checked before any work
+    except GenerateError as e:
+        sys.exit(f"known_ordering.py: {e}")
     names = [name_of(m, f) for m, f in zip(models, args.checkpoints)]
     reports = []
     for model, name in zip(models, names):

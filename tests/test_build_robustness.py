@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -12,6 +13,7 @@ import time
 import pytest
 
 from conftest import TINY, release_files as _files, tiny_build_command as _build_args
+from wsp_data.machine import cpu_model
 from wsp_data.schema import RELEASE_JSON, STAGING_DIR
 
 WSP = [sys.executable, "-m", "wsp_eval.cli"]
@@ -45,6 +47,30 @@ def test_sharded_killed_and_resumed_build_is_byte_identical(tmp_path, t1_release
 
     again = subprocess.run(_build_args(out), capture_output=True, text=True, timeout=600)
     assert again.returncode == 0 and "up to date" in again.stdout
+
+
+def test_slots_record_their_cpu_and_a_build_from_two_cpu_types_says_so(tmp_path, t1_release):
+    """Every slot records the CPU type that decided it (`built_on` in the build report) and its process's peak
+    memory (printed by the build); a config assembled from slots of two CPU types (here: shard 0's slot staged as if
+    another machine had decided it) warns."""
+    report = json.loads((t1_release / "t1_maniskill" / "build_report.json").read_text())
+    assert report["built_on"] == {cpu_model(): list(range(TINY["count"]))}
+
+    out = tmp_path / "worldsimprobe"
+    one = ["--count", "2", "--tasks", "PickCube"]  # after TINY's: argparse keeps the last
+    first = subprocess.run([*_build_args(out), *one, "--shard", "0/2"], capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    slot = out / STAGING_DIR / "t1_maniskill" / "slot_000000" / "slot.json"
+    record = json.loads(slot.read_text())
+    assert record["cpu"] == cpu_model()
+    assert record["peak_rss_mb"] > 100  # the deciding process's peak memory: a ManiSkill simulator holds more
+    slot.write_text(json.dumps({**record, "cpu": "Other CPU (x86_64)"}))
+    second = subprocess.run([*_build_args(out), *one, "--shard", "1/2"], capture_output=True, text=True, timeout=600)
+    assert second.returncode == 0, second.stderr
+    assert "slots were decided on 2 CPU types" in second.stdout
+    assert re.search(r"peak memory of a build worker \d+\.\d GB", second.stdout)
+    built_on = json.loads((out / "t1_maniskill" / "build_report.json").read_text())["built_on"]
+    assert built_on == {"Other CPU (x86_64)": [0], cpu_model(): [1]}
 
 
 def _wsp(*args: str, timeout: int = 300) -> subprocess.CompletedProcess:

@@ -70,7 +70,8 @@ def build_config(out: Path, suite: str, platform: str, count: int, tasks: tuple[
     if result.report and not result.up_to_date:  # the prebuild's log shows where its time goes
         r = result.report
         print(f"[tiny releases]   {r['config']}: {result.seconds:.0f} s, kept {r['kept']}/{r['requested']} of "
-              f"{r['proposed']} proposals, {result.rendered_steps} rendered steps, dropped {r['dropped'] or 'none'}",
+              f"{r['proposed']} proposals, {result.rendered_steps} rendered steps, dropped {r['dropped'] or 'none'}, "
+              f"peak worker memory {result.peak_worker_rss_mb / 1024:.1f} GB",
               flush=True)
     return out
 

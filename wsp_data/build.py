@@ -22,6 +22,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from wsp_data.builders import BUILDERS, BuildConfig, Kept, builder_class
+from wsp_data.machine import cpu_model, mixed_cpus_warning, peak_rss_mb
 from wsp_data.release import ReleaseError, load_release, record_build, write_release
 from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
@@ -47,6 +48,7 @@ class BuildResult:
     rendered_steps: int
     report: dict | None = None
     up_to_date: bool = False  # the config was already assembled from this very build config
+    peak_worker_rss_mb: float = 0.0  # the largest peak resident memory of a process that decided a slot now
     log: Path | None = None  # library, simulator and encoder output of this build
 
 
@@ -102,7 +104,7 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
     """Try attempts for one slot until one is kept: the decision and the kept instance's rollouts."""
     cfg: BuildConfig = builder.config
     plan = builder.plan(slot)
-    record = SlotRecord(slot)
+    record = SlotRecord(slot, cpu=cpu_model())
     rollouts: list[RolloutArrays] = []
     for a in range(cfg.max_attempts):
         seed = cfg.scene_seed(slot, a)
@@ -125,6 +127,7 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
             record.roles = [r.role for r in out.rollouts]
             rollouts = out.rollouts
             break
+    record.peak_rss_mb = peak_rss_mb()
     return record, rollouts
 
 
@@ -206,6 +209,7 @@ def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
     proposed = sum(len(r.attempts) for r in records)
     kept = sum(r.kept for r in records)
     return {
+        "built_on": slots_per_cpu(records),
         "config": config.name, "build_config": config.to_json(), "requested": config.count, "kept": kept,
         "exhausted_slots": [r.slot for r in records if not r.kept], "proposed": proposed,
         "acceptance_rate": round(kept / proposed, 4) if proposed else None, "dropped": dict(sorted(dropped.items())),
@@ -214,6 +218,14 @@ def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
         "rendered_steps": steps["rendered"], "unrendered_steps": steps["simulated"],
         "rendered_steps_avoided": steps["render_avoided"],
     }
+
+
+def slots_per_cpu(records: list[SlotRecord]) -> dict[str, list[int]]:
+    """CPU type → the slots it decided, in order."""
+    cpus: dict[str, list[int]] = defaultdict(list)
+    for r in sorted(records, key=lambda r: r.slot):
+        cpus[r.cpu or "unknown CPU"].append(r.slot)
+    return dict(sorted(cpus.items()))
 
 
 def format_report(report: dict, max_rows: int = 6) -> str:
@@ -234,6 +246,8 @@ def format_report(report: dict, max_rows: int = 6) -> str:
     if report["exhausted_slots"]:
         lines.append(f"{len(report['exhausted_slots'])} slot(s) found no valid instance in "
                      f"{report['build_config']['max_attempts']} attempts: {report['exhausted_slots'][:10]}")
+    if warning := mixed_cpus_warning(report["config"], report.get("built_on", {})):
+        lines.append(warning)
     return "\n".join(lines)
 
 
@@ -292,9 +306,16 @@ def _build_locked(config: BuildConfig, out: Path, index: int, total: int, worker
         t0 = time.perf_counter()
         todo = [k for k in range(config.count) if k % total == index and not staging.is_decided(k)]
         decided = kept = steps = proposed = 0
+        peak = 0.0
+        cpus: dict[str, list[int]] = {}  # CPU type → the slots it decided in this run
         bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="slot", disable=not progress, file=terminal())
         for record in decide_slots(config, staging, todo, workers, executor, address):
+            new_cpu = record.cpu not in cpus
+            cpus.setdefault(record.cpu, []).append(record.slot)
+            if new_cpu and (warning := mixed_cpus_warning(config.name, cpus)):
+                bar.write(warning, file=terminal())
             decided += 1
+            peak = max(peak, record.peak_rss_mb)
             kept += record.kept
             proposed += len(record.attempts)
             steps += sum(a["rendered_steps"] for a in record.attempts)
@@ -309,7 +330,7 @@ def _build_locked(config: BuildConfig, out: Path, index: int, total: int, worker
                 if staging.root.exists():  # else another shard of this config has just assembled it
                     report = assemble(config, out, staging, workers, progress)
     return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
-                       steps, report, log=log)
+                       steps, report, log=log, peak_worker_rss_mb=peak)
 
 
 def default_workers() -> int:

@@ -108,8 +108,10 @@ def cmd_build(args) -> int:
         print(f"{config.name} in {result.release} is up to date (same build config); nothing to do")
         return 0
     per = result.seconds / max(1, result.rendered_steps) * 1000
+    memory = (f"; peak memory of a build worker {result.peak_worker_rss_mb / 1024:.1f} GB"
+              if result.peak_worker_rss_mb else "")
     print(f"decided {result.decided_now} slot(s) in {result.seconds:.1f} s; {result.rendered_steps} rendered steps "
-          f"({per:.0f} ms per rendered step, all costs included)")
+          f"({per:.0f} ms per rendered step, all costs included){memory}")
     if result.assembled:
         print(format_report(result.report))
         from wsp_data.schema import BUILD_REPORT

@@ -81,6 +81,8 @@ class SlotRecord:
     attempts: list[dict] = field(default_factory=list)
     row: dict | None = None
     roles: list[str] = field(default_factory=list)
+    cpu: str = ""  # the CPU type that decided it (`wsp_data.machine.cpu_model`)
+    peak_rss_mb: float = 0.0  # the deciding process's peak resident memory once decided (not in the report)
 
     @property
     def kept(self) -> bool:

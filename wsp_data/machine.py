@@ -1,0 +1,49 @@
+"""The CPU a build runs on and the memory its workers hold, recorded with every decided slot.
+
+A slot's decision is byte-identical on one CPU type, and may differ in its last bits on another (docs/performance.md,
+"Across machines"): the release says which slots each CPU type decided, and a build whose slots come from more
+than one warns.
+"""
+
+from __future__ import annotations
+
+import functools
+import platform
+import resource
+from pathlib import Path
+
+
+@functools.cache
+def cpu_model() -> str:
+    """This machine's CPU: `/proc/cpuinfo`'s model name, the architecture and the widest x86 vector extension
+    (a virtual machine's model name is often generic), e.g. `AMD EPYC 7B13 (x86_64, AVX2)`."""
+    name, flags = "", set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and not name:
+                name = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    except OSError:
+        pass
+    vector = next((label for flag, label in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"))
+                   if flag in flags), "")
+    details = ", ".join(x for x in (platform.machine() or "unknown architecture", vector) if x)
+    return f"{name or platform.processor() or 'unknown CPU'} ({details})"
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory so far, MB (Linux reports kB, macOS bytes)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / (1024 * 1024 if platform.system() == "Darwin" else 1024), 1)
+
+
+def mixed_cpus_warning(config: str, cpus: dict[str, list[int]]) -> str | None:
+    """One line when the slots of `config` were decided on more than one CPU type (`cpus`: type → slots)."""
+    if len(cpus) < 2:
+        return None
+    parts = "; ".join(f"{cpu}: {len(slots)} slot(s)" for cpu, slots in sorted(cpus.items()))
+    return (f"[wsp build] warning: {config}'s slots were decided on {len(cpus)} CPU types ({parts}); a slot is "
+            "byte-identical only to one decided on the same CPU type, so this release matches no single-machine "
+            "build (build_report.json lists the slots per CPU type)")
