@@ -5,7 +5,8 @@ on the machine hits every column alike):
 
 - bare: LIBERO's own env (`OffScreenRenderEnv`) stepped with robosuite's camera observation switched on (the
   128² `agentview` RGB) plus one segmentation image through robosuite's render context (its segmentation
-  observable and `sim.render(segmentation=True)` overflow under numpy 2: the raw ids are read): what any user of the simulator pays for the same two images;
+  observable and `sim.render(segmentation=True)` overflow under numpy 2: the raw ids are read):
+  what any user of the simulator pays for the same two images;
 - ours: `LiberoPlatform.step` with rendering (physics, both passes, the label images and every state field);
 - and ours split into its parts: the unrendered step (robosuite's physics and OSC controller), the RGB pass, the
   segmentation pass;
