@@ -75,15 +75,14 @@ def main() -> None:
     size, cam = IMAGE_SIZE, ours.camera_id
     rgb = np.empty((size, size, 3), np.uint8)
 
-    def rgb_pass(_: int) -> None:
-        ctx.gl_ctx.make_current()
-        ctx.render(width=size, height=size, camera_id=cam, segmentation=False)
-        mujoco.mjr_readPixels(rgb=rgb, depth=None, viewport=mujoco.MjrRect(0, 0, size, size), con=ctx.con)
+    def render_pass(segmentation: bool):
+        def one(_: int) -> None:  # one pass of `LiberoPlatform.render_frame`, read back into `rgb`
+            ctx.gl_ctx.make_current()
+            ctx.render(width=size, height=size, camera_id=cam, segmentation=segmentation)
+            mujoco.mjr_readPixels(rgb=rgb, depth=None, viewport=mujoco.MjrRect(0, 0, size, size), con=ctx.con)
+        return one
 
-    def seg_pass(_: int) -> None:
-        ctx.gl_ctx.make_current()
-        ctx.render(width=size, height=size, camera_id=cam, segmentation=True)
-        mujoco.mjr_readPixels(rgb=rgb, depth=None, viewport=mujoco.MjrRect(0, 0, size, size), con=ctx.con)
+    rgb_pass = render_pass(False)
 
     def bare_step(i: int) -> None:
         ctx_b = bare.env.sim._render_context_offscreen
@@ -95,7 +94,7 @@ def main() -> None:
     columns = {"bare simulator (robosuite step, RGB obs, seg render)": bare_step,
                "ours: LiberoPlatform.step, rendered": lambda i: ours.step(actions[i]),
                "  unrendered step (physics + OSC)": lambda i: physics.step(actions[i]),
-               "  RGB pass (4x MSAA)": rgb_pass, "  segmentation pass": seg_pass}
+               "  RGB pass (4x MSAA)": rgb_pass, "  segmentation pass": render_pass(True)}
     totals = {k: np.zeros(2) for k in columns}
     for _ in range(args.rounds):
         ours.reset(0), physics.reset(0)
