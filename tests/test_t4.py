@@ -194,3 +194,23 @@ def test_masks_read_by_row_group_match_a_file_without_statistics(release, rows, 
             np.testing.assert_array_equal(reference_masks(src, e, first), reference_masks(plain, e, first))
     assert len(reference_masks(src, rows[0]["episode_indices"][0])) == len(table.filter(
         pc.equal(table["episode_index"], rows[0]["episode_indices"][0])))
+
+
+def test_objects_moving_or_fading_without_contact_score_0_and_a_still_object_drawn_noisy_passes(release):
+    """`wsp study t4-negatives`'s stand-ins made from this build's references and their exact masks: an object shifted,
+    carried with the hand, faded out or smeared away from mid-clip scores 0 on every clip (the tracker's d, or the
+    presence rule where the object fades or smears in place); the reference and its noisy copy score 100."""
+    from wsp_eval import backends as registry
+    from wsp_eval.backends import BackendSpec
+    from wsp_eval.studies import t4_negatives
+
+    clips = t4_negatives.score_clips(release, "t4_maniskill", registry.make(BackendSpec(), t4_negatives.t4.NEEDS))
+    by = {v: [c for c in clips if c["variant"] == v] for v in t4_negatives.VARIANTS}
+    assert all(c["score"] == 100.0 for v in ("oracle", "noise") for c in by[v])
+    for v in t4_negatives.NEGATIVES:
+        assert by[v] or v == "carried", v
+        assert all(c["score"] == 0.0 for c in by[v]), (v, by[v])
+    assert all(c["presence"] < 0.4 for c in by["faded"] if c["tracked"] and c["displacement"] <= 10)
+    # blur lowers presence, less than fading does
+    faded = {c["instance_id"]: c["presence"] for c in by["faded"]}
+    assert all(c["presence"] > faded[c["instance_id"]] for c in by["object_blur"])

@@ -1,6 +1,7 @@
 """T4 point tracking (spec §4.4), simulator-free: the default tracker backend (OpenCV pyramidal
 Lucas–Kanade with a forward–backward check), the object displacement d, the distal-arm motion gate g and
-the per-rollout score S = 100·1[g ≥ 0.5·g_ref]·1[d ≤ 10].
+the tracker's part of the per-rollout score, S = 100·1[g ≥ 0.5·g_ref]·1[tracked]·1[d ≤ 10] (the T4 suite adds
+the presence rule of `wsp_eval.object_presence`).
 
 Everything runs in the 256×256 *scoring frame*: every video is resized to it (and turned grey) first, and
 pixel positions are given in it. Coordinates are OpenCV's (pixel centres at integers, x right, y down), so a
@@ -465,12 +466,14 @@ def object_path(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot_m
 
 @dataclass
 class ObjectMotion:
-    """The evaluated object's track: d (px), the visible fraction of frames (≥ 1 visible point), and the
-    number of textured query points at frame 0 (all 9 when the colour region tracks it)."""
+    """The evaluated object's track: d (px), the visible fraction of frames (≥ 1 visible point), the
+    number of textured query points at frame 0 (all 9 when the colour region tracks it), and its centroid's
+    displacement from frame 0 in every frame (T, 2) in the scoring frame."""
 
     displacement: float
     visible_fraction: float
     textured_points: int
+    path: np.ndarray
 
 
 def object_motion(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray | None = None,
@@ -478,7 +481,7 @@ def object_motion(video: ScoringVideo | np.ndarray, object_px: np.ndarray, robot
     """d = max over frames of ‖centroid_t − centroid_0‖ for the evaluated object (`object_path`)."""
     tracks, c = object_path(video, object_px, robot_mask0, tracker)
     d = float(np.linalg.norm(c - c[0], axis=1).max())
-    return ObjectMotion(d, float(tracks.visible.any(axis=1).mean()), int(tracks.visible[0].sum()))
+    return ObjectMotion(d, float(tracks.visible.any(axis=1).mean()), int(tracks.visible[0].sum()), c - c[0])
 
 
 def gate_frames(num_frames: int) -> tuple[int, int, int]:
@@ -514,7 +517,8 @@ def _gate(tracks: Tracks) -> float:
 
 @dataclass
 class T4Score:
-    """One rollout's T4 score and its parts."""
+    """One rollout's T4 score and its parts; `shifts` is the object's tracked displacement from frame 0 in every
+    frame (T, 2), in the scoring frame."""
 
     score: float
     displacement: float
@@ -522,6 +526,7 @@ class T4Score:
     gate_passed: bool
     visible_fraction: float
     tracked: bool
+    shifts: np.ndarray
 
 
 def t4_score(frames: np.ndarray, object_px: np.ndarray, reference_mask0: np.ndarray,
@@ -542,4 +547,5 @@ def t4_score(frames: np.ndarray, object_px: np.ndarray, reference_mask0: np.ndar
     passed = g >= GATE_RATIO * gate_reference
     tracked = visible_reference is None or motion.visible_fraction >= TRACKED_RATIO * visible_reference
     ok = passed and tracked and motion.displacement <= MOTION_MAX
-    return T4Score(100.0 * ok, motion.displacement, g, bool(passed), motion.visible_fraction, bool(tracked))
+    return T4Score(100.0 * ok, motion.displacement, g, bool(passed), motion.visible_fraction, bool(tracked),
+                   motion.path)

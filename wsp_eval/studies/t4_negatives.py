@@ -5,8 +5,8 @@ drawn as learned models draw it, which must still pass.
 From the middle of the clip on (`START` of its length), with the arm exactly the reference's:
 - `shifted`: the object slides `SHIFT` px (per 128 px of frame height) sideways over `RAMP_SECONDS`, then rests;
 - `faded`: the object fades out over `RAMP_SECONDS` and is gone;
-- `carried`: the object follows the hand (the distal arm's centroid) from then on, as a model draws a grasp that
-  never happened;
+- `carried`: the object follows the hand (the distal arm's centroid; on two arms the hand nearest the object) from
+  then on, as a model draws a grasp that never happened (only where that hand travels more than T4's 10 px);
 - `smeared`: the object drifts `SHIFT` / 2 px while it smears out (a Gaussian growing to `SMEAR` px).
 Positive controls: `oracle`, `object_blur` (the still object blurred by 1.5 px per 128), `noise` (the calibration
 baseline's σ 10 grey levels on every frame).
@@ -29,6 +29,7 @@ from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.studies import run_negatives
 from wsp_eval.suites import t4
 from wsp_eval.suites.reference import InstanceReference
+from wsp_eval.tracking import MOTION_MAX, SCORING_SIZE
 
 START = 0.5  # the share of the clip before the object starts doing what it must not
 RAMP_SECONDS = 1.0
@@ -52,6 +53,8 @@ class Clip:
         self.n = len(self.frames)
         self.scale = self.frames.shape[1] / 128
         self.start = int(START * self.n)
+        hands = ref.row.get("hand_pixels_256")
+        self.hands = None if hands is None else np.asarray(hands, np.float64)
 
     def ramp(self) -> np.ndarray:
         """0 before `start`, rising linearly to 1 over RAMP_SECONDS, then 1."""
@@ -61,10 +64,26 @@ class Clip:
         return cp.relayer(self.frames, self.obj, self.robot, np.arange(self.n), shifts)
 
 
-def _carried(c: Clip) -> np.ndarray:
-    hand = cp.centroids(c.hand) if c.hand.any() else np.zeros((c.n, 2))
+def _nearest_hand(c: Clip) -> np.ndarray:
+    """The distal-arm mask of the hand nearest the object at `start` (a two-arm robot's pixels go to the nearer
+    frame-0 hand pixel); the whole label-2 mask on a one-arm robot."""
+    if c.hands is None or not c.hand.any():
+        return c.hand
+    h, w = c.hand.shape[1:]
+    hands = (c.hands + 0.5) * np.array([w, h]) / SCORING_SIZE - 0.5
+    ys, xs = np.mgrid[:h, :w]
+    owner = np.linalg.norm(np.stack([xs, ys], -1)[:, :, None] - hands[None, None], axis=-1).argmin(axis=-1)
+    near = int(np.linalg.norm(hands - cp.centroids(c.obj)[c.start], axis=1).argmin())
+    return c.hand & (owner == near)[None]
+
+
+def _carried(c: Clip) -> np.ndarray | None:
+    hand_mask = _nearest_hand(c)
+    hand = cp.centroids(hand_mask) if hand_mask.any() else np.zeros((c.n, 2))
     follow = hand - hand[c.start]
     follow[: c.start] = 0
+    if np.linalg.norm(follow, axis=1).max() * SCORING_SIZE / c.frames.shape[1] <= MOTION_MAX:
+        return None  # the hand stays within T4's tolerance: carrying the object with it is no negative
     return c.shifted_by(follow)
 
 
@@ -82,7 +101,8 @@ def _smeared(c: Clip) -> np.ndarray:
     return out
 
 
-VARIANTS: dict[str, Callable[[Clip], np.ndarray]] = {
+# None: the variant does not apply to the clip
+VARIANTS: dict[str, Callable[[Clip], np.ndarray | None]] = {
     "oracle": lambda c: c.frames,
     "object_blur": lambda c: cp.blurred_region(c.frames, c.obj & ~c.robot, OBJECT_BLUR * c.scale),
     "noise": lambda c: cp.noisy(c.frames, NOISE_SIGMA, NOISE_SEED),
@@ -100,9 +120,12 @@ def score_clips(release: Path, config: str, backends, limit: int | None = None, 
         ref = InstanceReference(release / config, row)
         clip, prepared = Clip(ref), t4.prepare(ref, backends)
         for name, make in VARIANTS.items():
-            score, detail = t4.score_seed(prepared, {"reference": (make(clip), clip.fps)}, backends)
+            if (frames := make(clip)) is None:
+                continue
+            score, detail = t4.score_seed(prepared, {"reference": (frames, clip.fps)}, backends)
             out.append({"config": config, "instance_id": row["instance_id"], "kind": row["kind"], "variant": name,
-                        "score": float(score), **{k: detail[k] for k in ("displacement", "gate_passed", "tracked")}})
+                        "score": float(score),
+                        **{k: detail[k] for k in ("displacement", "gate_passed", "tracked", "presence")}})
         if progress:
             progress()
     return out
@@ -114,6 +137,8 @@ def summarise(records: list[dict]) -> dict:
         rows = {}
         for name in VARIANTS:
             recs = [r for r in records if split_config(r["config"])[1] == platform and r["variant"] == name]
+            if not recs:
+                continue
             s = np.array([r["score"] for r in recs])
             rows[name] = {"n": len(recs), "mean": float(s.mean()), "passed": float(100 * (s >= 50).mean()),
                           "negative": name in NEGATIVES}

@@ -1,12 +1,15 @@
 """T4 Interaction grounding (spec §3.4): track the evaluated object and the distal arm through the generated
-video (`wsp_eval.tracking`, tracker backend); S = 100·1[g ≥ 0.5·g_ref]·1[tracked]·1[d ≤ 10 px] (tracked: the
-object is visible in at least half as many frames as the same tracker sees it in the reference); report by kind."""
+video (`wsp_eval.tracking`, tracker backend) and check that the object is still drawn where it stands
+(`wsp_eval.object_presence`); S = 100·1[g ≥ 0.5·g_ref]·1[tracked]·1[d ≤ 10 px]·1[P ≥ 0.4] (tracked: the
+object is visible in at least half as many frames as the same tracker sees it in the reference; P: its presence);
+report by kind."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.tracking import object_motion, scoring_video, t4_score
+from wsp_eval.object_presence import KEEP, frame_presence, presence, presence_reference
+from wsp_eval.tracking import SCORING_SIZE, object_motion, scoring_video, t4_score
 
 SUITE, TITLE = "t4", "Interaction grounding"
 ROLES = ("reference",)
@@ -29,17 +32,27 @@ def prepare(ref, backends) -> dict:
         return {"visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction}
 
     hands = ref.row.get("hand_pixels_256")  # two-arm platforms: the gate is per hand
+    objects = ref.object_masks("reference")
+    evaluated = objects == int(ref.row["evaluated_object_index"]) + 1
+    present = presence_reference(ref.frames("reference"), evaluated, ref.masks("reference") > 0,
+                                 (objects > 0) & ~evaluated, ref.fps)
     return {"object_px": object_px, "mask0": mask0, "gate_reference": float(ref.row["gate_reference"]),
             "visible_reference": ref.cached(visible)["visible_reference"],
-            "hands": None if hands is None else np.asarray(hands, np.float64)}
+            "hands": None if hands is None else np.asarray(hands, np.float64), "presence": present}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
     frames, _ = videos["reference"]
     s = t4_score(frames, prepared["object_px"], prepared["mask0"], prepared["gate_reference"],
                  prepared["visible_reference"], backends.tracker, prepared["hands"])
-    return s.score, {"displacement": s.displacement, "gate": s.gate, "gate_passed": s.gate_passed,
-                     "visible_fraction": s.visible_fraction, "tracked": s.tracked}
+    ref = prepared["presence"]
+    h, w = ref.shape
+    shifts = s.shifts * np.array([w, h], np.float64) / SCORING_SIZE
+    p = presence(frame_presence(frames, ref, shifts), ref.window)
+    present = p >= KEEP
+    return s.score * present, {"displacement": s.displacement, "gate": s.gate, "gate_passed": s.gate_passed,
+                               "visible_fraction": s.visible_fraction, "tracked": s.tracked, "presence": p,
+                               "present": bool(present)}
 
 
 def groups(rows: list[dict]) -> list[str]:
