@@ -280,6 +280,6 @@ def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp
     for k in kinds.values():
         assert k["generated_micro_mse"] == pytest.approx(k["reference_micro_mse"], rel=0.2)
     assert kinds["expert"]["reference_ratio_to_expert"] == 1.0
-    for name in ("libero", "aloha"):  # the packaged checkpoints load and fit the limit
+    for name in ("libero", "aloha", "maniskill"):  # the packaged checkpoints load and fit the limit
         path = idm.PACKAGED / f"idm_{name}.json"
         assert path.stat().st_size <= idm.MAX_CHECKPOINT_BYTES and idm.load(path)["platform"] == name
