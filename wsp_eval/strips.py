@@ -4,7 +4,8 @@ Per scored config, the `WORST` lowest-scoring instances (their lowest-scoring se
 the clip, the generated video above its reference, the evaluated object's frame-0 position ringed on both for
 T4 and T5 and, on T4's generated row, the tracked object centroid's path so far; written as
 `strips/<config>/<n>.png` beside the report, with the evidence that decided the score (T1 r against r*, T2/T3
-RMFA per 2 s window, T4 displacement, gate and tracking, T5 the object's fidelity, the arm's RMFA and the label judge's verdict).
+RMFA per 2 s window, T4 displacement, gate, tracking and presence, T5 the object's fidelity, the arm's RMFA and
+the label judge's verdict).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from wsp_eval.object_presence import KEEP
 from wsp_eval.reference import reference_frames, reference_masks
 from wsp_eval.submission import Expected
 from wsp_eval.video import VideoError, read_video
@@ -30,7 +32,8 @@ def evidence(suite: str, seed: dict, row: dict) -> str:
     if suite == "t4":
         return (f"S {s:.0f}: object moved d = {seed.get('displacement', 0):.1f} px (pass ≤ 10); arm gate "
                 f"{'passed' if seed.get('gate_passed') else 'failed'} ({seed.get('gate', 0):.1f} px); object "
-                f"{'tracked' if seed.get('tracked', True) else 'lost'} in {seed.get('visible_fraction', 0):.0%} of frames")
+                f"{'tracked' if seed.get('tracked', True) else 'lost'} in {seed.get('visible_fraction', 0):.0%} of "
+                f"frames; presence {seed.get('presence', 1.0):.2f} (pass ≥ {KEEP})")
     if suite == "t5":
         return (f"S {s:.0f}: object fidelity {seed.get('object_fidelity', 0):.0f} (relative position error "
                 f"{seed.get('object_error', 0):.2f}), arm RMFA {seed.get('arm_rmfa', 0):.0f}; label judge (reported "
