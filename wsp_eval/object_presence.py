@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from wsp_eval.tracking import to_lab
+
 RING = (2.0, 6.0)  # px per 128 px of frame height: the surroundings lie this far outside the frame-0 mask
 VISIBLE_MIN = 0.5  # share of the frame-0 object area in sight for a reference frame to count
 CONTRAST_MIN = 8.0  # CIE76 ΔE: a reference frame whose object stands out less than this does not count
@@ -51,10 +53,6 @@ def _disc(radius: float) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
-def _lab(frame: np.ndarray) -> np.ndarray:
-    return cv2.cvtColor(frame.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
-
-
 def presence_reference(frames: np.ndarray, obj: np.ndarray, robot: np.ndarray, others: np.ndarray,
                        fps: float) -> PresenceReference:
     """`frames` (T, H, W, 3) the reference; `obj`, `robot`, `others` (T, H, W) bool: the evaluated object's mask,
@@ -71,21 +69,21 @@ def presence_reference(frames: np.ndarray, obj: np.ndarray, robot: np.ndarray, o
         if area0 == 0 or inside.sum() < VISIBLE_MIN * area0 or not around.any():
             out.append(None)
             continue
-        lab = _lab(frame)
+        image = to_lab(frame)
         pin, pout = np.nonzero(inside), np.nonzero(around)
-        v = lab[pin].mean(axis=0) - lab[pout].mean(axis=0)
+        v = image[pin].mean(axis=0) - image[pout].mean(axis=0)
         out.append((np.stack(pin), np.stack(pout), v) if np.linalg.norm(v) >= CONTRAST_MIN else None)
     return PresenceReference(out, frames.shape[1:3], max(1, int(round(WINDOW_SECONDS * fps))))
 
 
-def _contrast(lab: np.ndarray, pin: np.ndarray, pout: np.ndarray, dy: int, dx: int) -> np.ndarray | None:
-    h, w = lab.shape[:2]
+def _contrast(image: np.ndarray, pin: np.ndarray, pout: np.ndarray, dy: int, dx: int) -> np.ndarray | None:
+    h, w = image.shape[:2]
     a, b = pin + np.array([[dy], [dx]]), pout + np.array([[dy], [dx]])
     ka = (a[0] >= 0) & (a[0] < h) & (a[1] >= 0) & (a[1] < w)
     kb = (b[0] >= 0) & (b[0] < h) & (b[1] >= 0) & (b[1] < w)
     if not ka.any() or not kb.any():
         return None
-    return lab[a[0][ka], a[1][ka]].mean(axis=0) - lab[b[0][kb], b[1][kb]].mean(axis=0)
+    return image[a[0][ka], a[1][ka]].mean(axis=0) - image[b[0][kb], b[1][kb]].mean(axis=0)
 
 
 def frame_presence(frames: np.ndarray, ref: PresenceReference, shifts: np.ndarray) -> np.ndarray:
@@ -102,12 +100,12 @@ def frame_presence(frames: np.ndarray, ref: PresenceReference, shifts: np.ndarra
         frame = frames[t]
         if frame.shape[:2] != ref.shape:
             frame = cv2.resize(frame, ref.shape[::-1], interpolation=cv2.INTER_AREA)
-        lab = _lab(frame)
+        image = to_lab(frame)
         cx, cy = (int(round(s)) for s in shifts[t])
         best = -np.inf
         for dy in range(cy - SLACK, cy + SLACK + 1):
             for dx in range(cx - SLACK, cx + SLACK + 1):
-                g = _contrast(lab, pin, pout, dy, dx)
+                g = _contrast(image, pin, pout, dy, dx)
                 if g is not None:
                     best = max(best, float(g @ v) / float(v @ v))
         p[t] = best if np.isfinite(best) else 0.0

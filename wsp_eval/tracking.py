@@ -313,7 +313,8 @@ class ColourModel:
     surround: np.ndarray
 
 
-def _lab(rgb: np.ndarray) -> np.ndarray:
+def to_lab(rgb: np.ndarray) -> np.ndarray:
+    """An RGB image (uint8) in CIE Lab (float32; L 0–100)."""
     return cv2.cvtColor(rgb.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
 
 
@@ -340,7 +341,7 @@ def _near(lab: np.ndarray, colour: np.ndarray, delta_e: float) -> np.ndarray:
 
 
 def _colour_mask(rgb: np.ndarray, lab: np.ndarray) -> np.ndarray:
-    return _near(_lab(rgb), lab, COLOUR_DELTA_E).astype(np.uint8)
+    return _near(to_lab(rgb), lab, COLOUR_DELTA_E).astype(np.uint8)
 
 
 def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarray) -> ColourModel | None:
@@ -351,7 +352,7 @@ def colour_model(rgb0: np.ndarray, object_px: np.ndarray, robot_mask0: np.ndarra
     k = COLOUR_PATCH
     if not (k <= x < SCORING_SIZE - k and k <= y < SCORING_SIZE - k):
         return None
-    lab0 = _lab(rgb0)
+    lab0 = to_lab(rgb0)
     lab = np.median(lab0[y - k:y + k + 1, x - k:x + k + 1].reshape(-1, 3), axis=0)
     match = _near(lab0, lab, COLOUR_DELTA_E).astype(np.uint8)
     _, labels = cv2.connectedComponents(match, connectivity=8)
@@ -388,7 +389,7 @@ def occlusion_fit(rgb: np.ndarray, visible: np.ndarray, model: ColourModel, esti
     x1, y1 = min(left + 2 * r + w + 1, SCORING_SIZE), min(top + 2 * r + h + 1, SCORING_SIZE)
     if x1 - x0 < w or y1 - y0 < h:
         return np.asarray(estimate, np.float64)
-    planes = _planes(_lab(rgb[y0:y1, x0:x1]))
+    planes = _planes(to_lab(rgb[y0:y1, x0:x1]))
     coloured = np.sqrt(_squared_delta_e(planes, model.lab)) < COLOUR_DELTA_E
     unchanged = np.sqrt(_squared_delta_e(planes, model.lab0[y0:y1, x0:x1])) < BACKGROUND_DELTA_E
     nearest = np.full(planes[0].shape, np.inf, np.float32)  # to the nearest surrounding colour (sqrt is monotone)
@@ -503,9 +504,15 @@ def motion_gate(video: ScoringVideo | np.ndarray, reference_mask0: np.ndarray, t
     tracks = (track_fn or track)(video, seeds, anchored=False)
     if hands is None:
         return _gate(tracks)
-    owner = np.linalg.norm(seeds[:, None] - np.asarray(hands, np.float64)[None], axis=-1).argmin(axis=1)
+    owner = nearest_hand(seeds, hands)
     return max((_gate(Tracks(tracks.positions[:, owner == k], tracks.visible[:, owner == k]))
                 for k in range(len(hands))), default=0.0)
+
+
+def nearest_hand(points: np.ndarray, hands: np.ndarray) -> np.ndarray:
+    """For each of `points` (N, 2), the index of the nearest of `hands` (K, 2), in the same coordinates."""
+    return np.linalg.norm(np.asarray(points, np.float64)[:, None] - np.asarray(hands, np.float64)[None],
+                          axis=-1).argmin(axis=1)
 
 
 def _gate(tracks: Tracks) -> float:

@@ -29,7 +29,7 @@ from wsp_eval.release_format import INSTANCES, split_config
 from wsp_eval.studies import run_negatives
 from wsp_eval.suites import t4
 from wsp_eval.suites.reference import InstanceReference
-from wsp_eval.tracking import MOTION_MAX, SCORING_SIZE
+from wsp_eval.tracking import MOTION_MAX, SCORING_SIZE, nearest_hand
 
 START = 0.5  # the share of the clip before the object starts doing what it must not
 RAMP_SECONDS = 1.0
@@ -72,7 +72,7 @@ def _nearest_hand(c: Clip) -> np.ndarray:
     h, w = c.hand.shape[1:]
     hands = (c.hands + 0.5) * np.array([w, h]) / SCORING_SIZE - 0.5
     ys, xs = np.mgrid[:h, :w]
-    owner = np.linalg.norm(np.stack([xs, ys], -1)[:, :, None] - hands[None, None], axis=-1).argmin(axis=-1)
+    owner = nearest_hand(np.stack([xs.ravel(), ys.ravel()], -1), hands).reshape(h, w)
     near = int(np.linalg.norm(hands - cp.centroids(c.obj)[c.start], axis=1).argmin())
     return c.hand & (owner == near)[None]
 
