@@ -85,3 +85,24 @@ def test_a_video_of_another_length_is_refused():
     frames, obj = scene()
     with pytest.raises(ValueError, match="frames against a reference"):
         op.frame_presence(frames[:-1], reference(frames, obj), np.zeros((N - 1, 2)))
+
+
+def test_the_cached_record_gives_back_the_same_reference():
+    """T4 keeps the presence reference in the reference-result cache as JSON: read back, it has the same pixel
+    sets in the same order and v*_t to the bit, so a cached scoring equals a fresh one exactly."""
+    import json
+
+    frames, obj = scene()
+    robot = np.zeros_like(obj)
+    robot[: N // 3, 55:64, 55:70] = True  # part of the object hidden for a while: the sets change per frame
+    ref = reference(frames, obj, robot)
+    back = op.PresenceReference.from_record(json.loads(json.dumps(ref.to_record())))
+    assert (back.shape, back.window) == (ref.shape, ref.window)
+    assert [e is None for e in back.frames] == [e is None for e in ref.frames]
+    for a, b in zip(ref.frames, back.frames):
+        if a is not None:
+            assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    smeared = frames.copy()
+    smeared[N // 2:] = [cv2.GaussianBlur(f, (0, 0), 3.0) for f in frames[N // 2:]]
+    for video in (frames, smeared):
+        assert score(back, video) == score(ref, video)

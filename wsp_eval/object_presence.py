@@ -22,6 +22,8 @@ frames; an object that is gone for a second is gone.
 
 from __future__ import annotations
 
+import base64
+import zlib
 from dataclasses import dataclass
 
 import cv2
@@ -41,11 +43,36 @@ KEEP = 0.4  # presence at which the rule passes: between the largest tracked fad
 @dataclass
 class PresenceReference:
     """The reference side, per frame: the object's and its surroundings' pixel coordinates (rows, cols) and the
-    reference contrast v*_t (Lab); `None` where the frame is not evaluable."""
+    reference contrast v*_t (Lab, float32 as `to_lab` gives it); `None` where the frame is not evaluable."""
 
     frames: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None]
     shape: tuple[int, int]
     window: int
+
+    def to_record(self) -> dict:
+        """JSON-ready (the reference-result cache keeps it): per frame null or the two pixel sets as bit-packed,
+        compressed masks of the frame with v*_t; `from_record` gives back the same coordinates in the same order."""
+        frames = [None if e is None else {"in": _pack(e[0], self.shape), "around": _pack(e[1], self.shape),
+                                          "v": [float(x) for x in e[2]]} for e in self.frames]
+        return {"frames": frames, "shape": list(self.shape), "window": self.window}
+
+    @classmethod
+    def from_record(cls, record: dict) -> PresenceReference:
+        shape = (int(record["shape"][0]), int(record["shape"][1]))
+        frames = [None if e is None else (_unpack(e["in"], shape), _unpack(e["around"], shape),
+                                          np.asarray(e["v"], np.float32)) for e in record["frames"]]
+        return cls(frames, shape, int(record["window"]))
+
+
+def _pack(rows_cols: np.ndarray, shape: tuple[int, int]) -> str:
+    mask = np.zeros(shape, bool)
+    mask[rows_cols[0], rows_cols[1]] = True
+    return base64.b64encode(zlib.compress(np.packbits(mask).tobytes())).decode("ascii")
+
+
+def _unpack(text: str, shape: tuple[int, int]) -> np.ndarray:
+    bits = np.unpackbits(np.frombuffer(zlib.decompress(base64.b64decode(text)), np.uint8), count=shape[0] * shape[1])
+    return np.stack(np.nonzero(bits.reshape(shape)))
 
 
 def _disc(radius: float) -> np.ndarray:

@@ -3,8 +3,8 @@
 The reference side of an instance depends only on the release and the evaluator, never on a submission, so it is
 computed once and reused by every later scoring of any submission: RMFA's reference flows (T2, T3;
 `wsp_eval.flow_cache`) and the reference's own results (T4: the evaluated object's visible fraction in the
-reference; T5: the judge's verdict on the reference), which spared every scoring of T4 and T5 decoding and
-tracking or judging each reference (docs/performance.md).
+reference and its presence reference; T5: the judge's verdict on the reference), which spare every scoring of T4
+and T5 decoding and tracking or judging each reference (docs/performance.md).
 
 A folder is named by a key: the SHA-256 of what the entries depend on besides the release (the evaluator and the
 scoring code), so another backend or changed scoring code never reads stale entries. Inside it, each config's

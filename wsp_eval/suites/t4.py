@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from wsp_eval.object_presence import KEEP, frame_presence, presence, presence_reference
+from wsp_eval.object_presence import KEEP, PresenceReference, frame_presence, presence, presence_reference
 from wsp_eval.tracking import SCORING_SIZE, object_motion, scoring_video, t4_score
 
 SUITE, TITLE = "t4", "Interaction grounding"
@@ -19,26 +19,29 @@ REFERENCE_RESULTS = True  # `prepare` keeps its result on the reference in the r
 
 
 def prepare(ref, backends) -> dict:
-    """The instance's query point, frame-0 mask and gate; the object's visible fraction in the reference is
-    measured here with the scoring tracker (not read from the release; kept in the reference-result cache), so
-    that the tracking-failure rule compares like with like whichever tracker scores and whichever tracker
-    version built the release."""
+    """The instance's query point, frame-0 mask and gate; the reference side of the tracking-failure and presence
+    rules, measured here on the reference and kept in the reference-result cache: the object's visible fraction
+    with the scoring tracker (not read from the release, so that the rule compares like with like whichever
+    tracker scores and whichever tracker version built the release) and the presence reference."""
     object_px, mask0 = np.asarray(ref.row["object_pixel_256"], np.float64), ref.first_mask("reference")
     tracker = backends.tracker
 
-    def visible() -> dict:
+    def reference_side() -> dict:
         frames = ref.frames("reference")
         video = tracker.prepare(frames) if tracker else scoring_video(frames)
-        return {"visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction}
+        objects = ref.object_masks("reference")
+        evaluated = objects == int(ref.row["evaluated_object_index"]) + 1
+        present = presence_reference(frames, evaluated, ref.masks("reference") > 0, (objects > 0) & ~evaluated,
+                                     ref.fps)
+        return {"visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction,
+                "presence": present.to_record()}
 
+    side = ref.cached(reference_side)
     hands = ref.row.get("hand_pixels_256")  # two-arm platforms: the gate is per hand
-    objects = ref.object_masks("reference")
-    evaluated = objects == int(ref.row["evaluated_object_index"]) + 1
-    present = presence_reference(ref.frames("reference"), evaluated, ref.masks("reference") > 0,
-                                 (objects > 0) & ~evaluated, ref.fps)
     return {"object_px": object_px, "mask0": mask0, "gate_reference": float(ref.row["gate_reference"]),
-            "visible_reference": ref.cached(visible)["visible_reference"],
-            "hands": None if hands is None else np.asarray(hands, np.float64), "presence": present}
+            "visible_reference": side["visible_reference"],
+            "hands": None if hands is None else np.asarray(hands, np.float64),
+            "presence": PresenceReference.from_record(side["presence"])}
 
 
 def score_seed(prepared: dict, videos, backends) -> tuple[float, dict]:
