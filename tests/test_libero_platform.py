@@ -39,19 +39,6 @@ def test_registry_lists_forty_solvable_tasks():
         assert spec.name == name and spec.relation in ("in", "on") and spec.objects[0] == spec.target
 
 
-def test_t5_never_draws_an_excluded_task_and_says_why():
-    from wsp_data.builders import BuildConfig
-    from wsp_data.builders.t5 import T5Builder
-    from wsp_data.platforms.libero.kit import KIT, T5_EXCLUDED
-
-    (excluded, why), = T5_EXCLUDED.items()
-    per_primitive = KIT.t5_primitive_tasks(tuple(TASKS))
-    assert all(excluded not in tasks for tasks in per_primitive.values())
-    assert per_primitive["pull"] and per_primitive["push"]  # every other task still serves
-    with pytest.raises(ValueError, match="joint limit"):  # refused before anything is simulated
-        T5Builder(BuildConfig("t5", "libero", 4, (excluded,)))
-
-
 def test_expert_stream_is_a_verified_success_and_replays_bit_identically(expert, render):
     actions = expert.trajectory(0)
     assert actions is not None and actions.shape[1] == 7 and actions.dtype == np.float32

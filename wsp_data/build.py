@@ -21,7 +21,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from wsp_data.builders import BUILDERS, BuildConfig, Kept, builder_class
+from wsp_data import pair_survey
+from wsp_data.builders import BUILDERS, BuildConfig, Kept, SlotPlan, builder_class
 from wsp_data.machine import cpu_model, mixed_cpus_warning, peak_rss_mb
 from wsp_data.release import ReleaseError, load_release, record_build, write_release
 from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR
@@ -106,7 +107,7 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
     plan = builder.plan(slot)
     record = SlotRecord(slot, cpu=cpu_model())
     rollouts: list[RolloutArrays] = []
-    for a in range(cfg.max_attempts):
+    for a in range(cfg.max_attempts if plan is not None else 0):  # None: the survey excluded every pair
         seed = cfg.scene_seed(slot, a)
         try:
             out = builder.attempt(plan, seed, cfg.rng(slot, a))
@@ -147,24 +148,40 @@ def _worker_init(config_json: dict, staging_root: str) -> None:
     _WORKER["staging"] = Staging(Path(staging_root))
 
 
-def _worker_decide(slot: int) -> SlotRecord:
-    return decide_slot(_WORKER["builder"], _WORKER["staging"], slot)
+def _worker_screen(unit: pair_survey.Unit) -> tuple[pair_survey.Unit, dict]:
+    return unit, pair_survey.screen_unit(_WORKER["builder"], unit)
+
+
+def _worker_decide(task: tuple[int, list[list[str]]]) -> SlotRecord:
+    slot, excluded = task
+    builder = _WORKER["builder"]
+    builder.exclude(frozenset(SlotPlan(*pair) for pair in excluded))
+    return decide_slot(builder, _WORKER["staging"], slot)
+
+
+def survey(builder, staging: Staging, screen, progress: bool = False) -> frozenset[SlotPlan]:
+    """The pairs the pair survey excludes (`wsp_data.pair_survey`), screening what is not staged yet by
+    `screen`."""
+    return pair_survey.excluded_pairs(pair_survey.run_survey(builder, staging.root, screen, progress))
 
 
 EXECUTORS = ("local", "ray")  # local: this process, or a process pool with --workers > 1; ray: see ray_executor
 
 
 def decide_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int, executor: str = "local",
-                 address: str | None = None) -> Iterator[SlotRecord]:
-    """Decide `slots` on `workers` processes (or Ray tasks), staging each kept instance; records as they end."""
+                 address: str | None = None, progress: bool = False) -> Iterator[SlotRecord]:
+    """Run the pair survey (what is not staged yet), then decide `slots`, on `workers` processes (or Ray tasks),
+    staging each kept instance; records as they end."""
     if executor == "ray":
         from wsp_data.ray_executor import run_slots
 
-        yield from run_slots(config, staging, slots, workers, address)
+        yield from run_slots(config, staging, slots, workers, address, progress)
         return
     if workers <= 1 or len(slots) <= 1:
         builder = builder_class(config.suite)(config)
         try:
+            builder.exclude(survey(builder, staging,
+                                   lambda units: ((u, pair_survey.screen_unit(builder, u)) for u in units), progress))
             for slot in slots:
                 yield decide_slot(builder, staging, slot)
         finally:
@@ -172,13 +189,17 @@ def decide_slots(config: BuildConfig, staging: Staging, slots: list[int], worker
         return
     ctx = mp.get_context("spawn")
     with ctx.Pool(workers, initializer=_worker_init, initargs=(config.to_json(), str(staging.root))) as pool:
-        yield from pool.imap_unordered(_worker_decide, slots)
+        excluded = survey(builder_class(config.suite)(config), staging,
+                          lambda units: pool.imap_unordered(_worker_screen, units), progress)
+        pairs = sorted([p.task, p.group] for p in excluded)
+        yield from pool.imap_unordered(_worker_decide, [(slot, pairs) for slot in slots])
 
 
 # -- report ---------------------------------------------------------------------------------------------
-def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
-    """Proposed / kept / dropped per task, per group (kind / primitive) and per reason, acceptance rates, and
-    the rendering that unrendered validation saved (deterministic: step counts, no timings)."""
+def build_report(config: BuildConfig, records: list[SlotRecord], survey_entries: list[dict] | None = None) -> dict:
+    """Proposed / kept / dropped per task, per group (kind / primitive) and per reason, acceptance rates, the
+    rendering that unrendered validation saved (deterministic: step counts, no timings), and the pair survey's
+    outcome where the config has one (`survey`; slots it left without a pair: `unplanned_slots`)."""
     def tally() -> dict:
         return {"proposed": 0, "kept": 0, "dropped": Counter()}
 
@@ -208,7 +229,11 @@ def build_report(config: BuildConfig, records: list[SlotRecord]) -> dict:
 
     proposed = sum(len(r.attempts) for r in records)
     kept = sum(r.kept for r in records)
+    survey = {} if not survey_entries else {
+        "survey": pair_survey.survey_report(survey_entries),
+        "unplanned_slots": [r.slot for r in records if not r.attempts]}
     return {
+        **survey,
         "built_on": slots_per_cpu(records),
         "config": config.name, "build_config": config.to_json(), "requested": config.count, "kept": kept,
         "exhausted_slots": [r.slot for r in records if not r.kept], "proposed": proposed,
@@ -231,8 +256,9 @@ def slots_per_cpu(records: list[SlotRecord]) -> dict[str, list[int]]:
 def format_report(report: dict, max_rows: int = 6) -> str:
     """The build's terminal summary: one line, the drop reasons, and the tasks that dropped proposals (worst
     first, at most `max_rows`); the full per-task and per-group tables are in build_report.json."""
+    rate = report["acceptance_rate"]
     lines = [f"{report['config']}: kept {report['kept']} / {report['requested']} requested, "
-             f"{report['proposed']} proposals (acceptance {report['acceptance_rate']:.0%}); rendered "
+             f"{report['proposed']} proposals (acceptance {'-' if rate is None else f'{rate:.0%}'}); rendered "
              f"{report['rendered_steps']} steps, validation without rendering avoided {report['rendered_steps_avoided']}"]
     if report["dropped"]:
         lines.append("dropped: " + ", ".join(f"{k}={v}" for k, v in report["dropped"].items()) + "; by task:")
@@ -243,9 +269,19 @@ def format_report(report: dict, max_rows: int = 6) -> str:
         lines.append(f"  {name}: kept {t['kept']} of {t['proposed']} ({rate:.0%}); {reasons}")
     if len(lossy) > max_rows:
         lines.append(f"  … {len(lossy) - max_rows} more task(s) with drops")
-    if report["exhausted_slots"]:
-        lines.append(f"{len(report['exhausted_slots'])} slot(s) found no valid instance in "
-                     f"{report['build_config']['max_attempts']} attempts: {report['exhausted_slots'][:10]}")
+    if survey := report.get("survey"):
+        excluded, n = survey["excluded"], len(survey["pairs"])
+        lines.append(f"pair survey: {len(excluded)} of {n} pairs yield no proposal that passes before rendering, "
+                     f"left out: {', '.join(excluded[:6])}" + (f" … {len(excluded) - 6} more" if len(excluded) > 6
+                                                              else "")
+                     if excluded else f"pair survey: each of {n} pairs yields a proposal that passes before rendering")
+    unplanned = set(report.get("unplanned_slots", []))
+    if exhausted := [k for k in report["exhausted_slots"] if k not in unplanned]:
+        lines.append(f"{len(exhausted)} slot(s) found no valid instance in "
+                     f"{report['build_config']['max_attempts']} attempts: {exhausted[:10]}")
+    if unplanned:
+        lines.append(f"{len(unplanned)} slot(s) left empty: the survey excluded every pair of their group: "
+                     f"{sorted(unplanned)[:10]}")
     if warning := mixed_cpus_warning(report["config"], report.get("built_on", {})):
         lines.append(warning)
     return "\n".join(lines)
@@ -264,7 +300,7 @@ def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1,
                      disable=not progress, file=terminal())
     with instances:
         write_config(out / config.name, config.name, config.platform, instances, workers)
-    report = build_report(config, records)
+    report = build_report(config, records, pair_survey.read_survey(staging.root))
     (out / config.name / BUILD_REPORT).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     record_build(out, config.name, config.to_json())
     write_release(out, BUILDERS)
@@ -309,7 +345,7 @@ def _build_locked(config: BuildConfig, out: Path, index: int, total: int, worker
         peak = 0.0
         cpus: dict[str, list[int]] = {}  # CPU type → the slots it decided in this run
         bar = tqdm(total=len(todo), desc=f"build {config.name}", unit="slot", disable=not progress, file=terminal())
-        for record in decide_slots(config, staging, todo, workers, executor, address):
+        for record in decide_slots(config, staging, todo, workers, executor, address, progress):
             new_cpu = record.cpu not in cpus
             cpus.setdefault(record.cpu, []).append(record.slot)
             if new_cpu and (warning := mixed_cpus_warning(config.name, cpus)):

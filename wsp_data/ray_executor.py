@@ -17,34 +17,56 @@ from __future__ import annotations
 import json
 from collections.abc import Iterator
 
-from wsp_data.builders import BuildConfig, builder_class
+from wsp_data.builders import BuildConfig, SlotPlan, builder_class
 from wsp_data.staging import SlotRecord, Staging
 
 _builders: dict[str, object] = {}
 
 
-def _decide(task: tuple[dict, int]) -> tuple[SlotRecord, dict[str, bytes]]:
-    """In a Ray worker: decide slot `task[1]` with this process's builder for the config `task[0]`; the kept
-    rollouts come back encoded, by role."""
-    from wsp_data.build import decide
-
-    config_json, slot = task
+def _builder(config_json: dict):
+    """This process's builder of the config (one config's simulators per worker: a later build frees the
+    earlier's)."""
     key = json.dumps(config_json, sort_keys=True)
     if key not in _builders:
-        for old in _builders.values():  # one config's simulators per worker: a later build frees the earlier's
+        for old in _builders.values():
             old.close()
         _builders.clear()
         cfg = BuildConfig.from_json(config_json)
         _builders[key] = builder_class(cfg.suite)(cfg)
-    record, rollouts = decide(_builders[key], slot)
+    return _builders[key]
+
+
+def _screen(task: tuple[dict, tuple]) -> tuple[tuple, dict]:
+    """In a Ray worker: screen one pair of the pair survey (`wsp_data.pair_survey`)."""
+    from wsp_data.pair_survey import screen_unit
+
+    config_json, unit = task
+    return unit, screen_unit(_builder(config_json), unit)
+
+
+def _decide(task: tuple[dict, list, int]) -> tuple[SlotRecord, dict[str, bytes]]:
+    """In a Ray worker: decide slot `task[2]` with this process's builder for the config `task[0]`, the survey's
+    excluded pairs `task[1]` left out; the kept rollouts come back encoded, by role."""
+    from wsp_data.build import decide
+
+    config_json, excluded, slot = task
+    builder = _builder(config_json)
+    builder.exclude(frozenset(SlotPlan(*pair) for pair in excluded))
+    record, rollouts = decide(builder, slot)
     return record, {r.role: r.encode() for r in rollouts}
 
 
 def run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int,
-              address: str | None) -> Iterator[SlotRecord]:
-    """Decide `slots` as Ray tasks; yield each record once it is staged locally (completion order)."""
+              address: str | None, progress: bool = False) -> Iterator[SlotRecord]:
+    """Run the pair survey, then decide `slots`, as Ray tasks; yield each record once it is staged locally
+    (completion order)."""
+    from wsp_data.build import survey
     from wsp_eval.ray_tasks import ray_imap
 
-    for record, rollouts in ray_imap(_decide, [(config.to_json(), slot) for slot in slots], workers, address):
+    cfg = config.to_json()
+    excluded = survey(builder_class(config.suite)(config), staging,
+                      lambda units: ray_imap(_screen, [(cfg, unit) for unit in units], workers, address), progress)
+    pairs = sorted([p.task, p.group] for p in excluded)
+    for record, rollouts in ray_imap(_decide, [(cfg, pairs, slot) for slot in slots], workers, address):
         staging.write_encoded(record, rollouts)
         yield record

@@ -138,8 +138,12 @@ class SuiteBuilder(ABC):
         append one unscored rollout of role `SOURCE_ROLE`: the unperturbed source (instance columns
         `source_episode_index` / `source_episode_id`; the action-blind baseline plays it back).
     Hooks:
-        `plan(slot)`: the slot's task (and group); default balances slots over the config's tasks.
+        `plan(slot)`: the slot's task (and group); default balances slots over the config's tasks. None when
+        the pair survey excluded every pair the slot could draw (the slot is decided with no attempt).
         `attempt(plan, seed, rng)`: propose, execute (unrendered first), validate, render what passed.
+        `survey_pairs()`, `screen(plan, seed, rng)`: the (task, group) pairs the slots draw from and the checks
+        a proposal for one passes before rendering, for the pair survey (`wsp_data.pair_survey`); default: no
+        survey. `exclude(pairs)`: the pairs the survey found no proposal for, left out of `plan`.
         `close()`: release simulator resources.
     """
 
@@ -154,8 +158,22 @@ class SuiteBuilder(ABC):
             raise ValueError(f"{self.suite} cannot be built on platform {config.platform!r}: {why}")
         self.config = config
 
-    def plan(self, slot: int) -> SlotPlan:
+    def plan(self, slot: int) -> SlotPlan | None:
         return SlotPlan(self.config.task_of(slot))
+
+    def survey_pairs(self) -> tuple[SlotPlan, ...]:
+        """The pairs the pair survey screens before any slot; none by default."""
+        return ()
+
+    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> tuple[str | None, int]:
+        """Unrendered: why a proposal for `plan` at scene seed `seed` is dropped before rendering (None when it
+        passes every check made before rendering: what `attempt` would render), and the unrendered steps spent."""
+        raise NotImplementedError(f"{type(self).__name__} has no pair survey")
+
+    def exclude(self, pairs: frozenset[SlotPlan]) -> None:
+        """Leave `pairs` (found by the survey to yield nothing) out of `plan`."""
+        if pairs:
+            raise NotImplementedError(f"{type(self).__name__} has no pair survey")
 
     @abstractmethod
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:

@@ -13,7 +13,8 @@ simulator states; only then rendered, and re-checked on the rendered rollout; it
 evaluated object's image moves visibly (`wsp_eval.object_track`, spec §4.3), as RMFA's suites require a scorable
 window. Slots are
 balanced exactly by primitive over the platform's primitives (`PlatformKit.t5_primitives`): slot k gets the
-(k mod n)-th and the next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn.
+(k mod n)-th and the next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn, less
+the (task, primitive) pairs the pair survey found no unrendered proposal for (`wsp_data.pair_survey`).
 """
 
 from __future__ import annotations
@@ -62,13 +63,31 @@ class T5Builder(SuiteBuilder):
         if missing:
             raise ValueError(f"T5 needs, for every primitive, {self.kit.t5_needs()}; none for {', '.join(missing)}")
 
+    excluded: frozenset[SlotPlan] = frozenset()
+
     def compatible(self, primitive: str) -> tuple[str, ...]:
         return self.primitive_tasks[primitive]
 
-    def plan(self, slot: int) -> SlotPlan:
+    def plan(self, slot: int) -> SlotPlan | None:
         primitive = self.primitives[slot % len(self.primitives)]
-        tasks = self.compatible(primitive)
-        return SlotPlan(tasks[(slot // len(self.primitives)) % len(tasks)], primitive)
+        tasks = tuple(t for t in self.compatible(primitive) if SlotPlan(t, primitive) not in self.excluded)
+        return SlotPlan(tasks[(slot // len(self.primitives)) % len(tasks)], primitive) if tasks else None
+
+    def survey_pairs(self) -> tuple[SlotPlan, ...]:
+        """Every (task, primitive) pair of the primitives the config's slots get."""
+        used = self.primitives[: self.config.count]
+        return tuple(SlotPlan(t, p) for p in used for t in self.compatible(p))
+
+    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> tuple[str | None, int]:
+        rig = self.rig(plan.task, self.kit.t5_scene(plan.group))
+        b = rig.branch(plan.group, seed)
+        if isinstance(b, Dropped):
+            return b.reason, b.simulated_steps
+        simulated, dropped = self._unrendered(plan, rig, seed, b)
+        return None if dropped is None else dropped.reason, simulated
+
+    def exclude(self, pairs: frozenset[SlotPlan]) -> None:
+        self.excluded = frozenset(pairs)
 
     def close(self) -> None:
         self.rig.close()
@@ -80,16 +99,22 @@ class T5Builder(SuiteBuilder):
             return b
         return self._validate(plan, rig, seed, b)
 
+    def _unrendered(self, plan: SlotPlan, rig: T5Rig, seed: int, b: Branch) -> tuple[int, Dropped | None]:
+        """Replay the branched stream unrendered and check it: the unrendered steps so far, and why it is
+        dropped (None: it passes)."""
+        ro = rig.state.replay(seed, b.stream, b.placements)
+        simulated = b.simulated + len(b.stream)
+        why = self.reject(rig, ro, plan.group, rig.objects.index(b.evaluated))
+        return simulated, None if why is None else Dropped(why, simulated_steps=simulated)
+
     def _validate(self, plan: SlotPlan, rig: T5Rig, seed: int, b: Branch) -> Kept | Dropped:
         """Replay the branched stream unrendered, check it, render it, check again, and make the instance."""
         primitive, spec = plan.group, rig.spec
         source, stream, placements, evaluated = b.source, b.stream, b.placements, b.evaluated
-        simulated = b.simulated
         ev = rig.objects.index(evaluated)
-        ro = rig.state.replay(seed, stream, placements)
-        simulated += len(stream)
-        if (why := self.reject(rig, ro, primitive, ev)) is not None:
-            return Dropped(why, simulated_steps=simulated)
+        simulated, dropped = self._unrendered(plan, rig, seed, b)
+        if dropped is not None:
+            return dropped
         rendered = rig.render.replay(seed, stream, placements)
         steps = len(stream)
         if (why := self.reject(rig, rendered, primitive, ev)) is not None:

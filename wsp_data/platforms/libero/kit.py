@@ -20,11 +20,6 @@ OSC_COMMANDED = 0.01  # m per step: an OSC command at least this large …
 OSC_STALLED = 0.05  # … achieving less than this fraction of it is a stalled hand (free motion: 0.09–0.36, 5th pct 0.16;
 #                     pressed into the table: 0.00–0.03; measured on a libero_object expert rollout)
 TAP_MIN_XY = 0.015  # m: T5's tap on LIBERO strikes the task's own low target (`t5_rules`), push's threshold
-T5_EXCLUDED = {  # tasks T5 never draws, with the measured reason
-    "libero_spatial/pick_up_the_black_bowl_next_to_the_cookie_box_and_place_it_on_the_plate":
-        "every primitive on the bowl beside the cookie box drives the arm past a joint limit (0 of 64 proposals "
-        "kept in two builds, 2026-11-24)",
-}
 
 
 def osc_blocked(qpos: np.ndarray, tcp_pose: np.ndarray, actions: np.ndarray) -> bool:
@@ -118,12 +113,10 @@ class LiberoKit(PlatformKit):
         from wsp_data.platforms.libero.experts import task_spec
         from wsp_data.platforms.libero.primitives import compatible
 
-        tasks = tuple(t for t in tasks if t not in T5_EXCLUDED)
         return {p: tuple(t for t in tasks if compatible(p, task_spec(t))) for p in self.t5_primitives()}
 
     def t5_needs(self) -> str:
-        return ("a task whose target is a bowl or a flat box (push, tap) among the selected ones, other than "
-                + "; ".join(f"{t} ({why})" for t, why in T5_EXCLUDED.items()))
+        return "a task whose target is a bowl or a flat box (push, tap) among the selected ones"
 
     def t5_rig(self, task: str, scene: Hashable):
         from wsp_data.platforms.libero.t5 import LiberoRig
