@@ -98,13 +98,15 @@ def entry_folder(config: str, fingerprint: str) -> str:
     return f"{config}@{fingerprint[:16]}" if fingerprint else config
 
 
-def load_or_compute_result(folder: Path, config: str, episode: int, compute: Callable[[], dict]) -> dict:
+def load_or_compute_result(folder: Path, config: str, episode: int, compute: Callable[[], dict],
+                           keys: Iterable[str] = ()) -> dict:
     """The cached JSON result of (config, episode) (`config`: the entry folder, `entry_folder`), or `compute()`
-    (JSON-ready; floats round-trip exactly) stored for the next scoring."""
+    (JSON-ready; floats round-trip exactly) stored for the next scoring; an entry lacking one of `keys` is
+    damaged and recomputed."""
     path = Path(folder) / config / RESULT_ENTRY.format(episode=episode)
     try:
         cached = json.loads(path.read_text())
-        if isinstance(cached, dict):
+        if isinstance(cached, dict) and all(k in cached for k in keys):
             return cached
     except (OSError, ValueError):
         pass  # absent or damaged: compute it

@@ -106,13 +106,13 @@ class InstanceReference:
             n += 1
         return n == len(frames)
 
-    def cached(self, compute: Callable[[], dict]) -> dict:
+    def cached(self, compute: Callable[[], dict], keys: tuple[str, ...] = ()) -> dict:
         """The suite's JSON-ready result on this instance's reference, from the reference-result cache when there
-        is one (`wsp_eval.reference_cache`), else `compute()`."""
+        is one (`wsp_eval.reference_cache`; an entry without every one of `keys` is recomputed), else `compute()`."""
         if self.result_cache is None:
             return compute()
         return load_or_compute_result(self.result_cache, self.cache_entry, self.episode(self.row["roles"][0]),
-                                      compute)
+                                      compute, keys)
 
     @property
     def cache_entry(self) -> str:

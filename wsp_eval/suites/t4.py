@@ -36,7 +36,7 @@ def prepare(ref, backends) -> dict:
         return {"visible_reference": object_motion(video, object_px, mask0, tracker).visible_fraction,
                 "presence": present.to_record()}
 
-    side = ref.cached(reference_side)
+    side = ref.cached(reference_side, ("visible_reference", "presence"))
     hands = ref.row.get("hand_pixels_256")  # two-arm platforms: the gate is per hand
     return {"object_px": object_px, "mask0": mask0, "gate_reference": float(ref.row["gate_reference"]),
             "visible_reference": side["visible_reference"],

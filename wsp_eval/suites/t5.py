@@ -41,7 +41,7 @@ class _Reference:
         self.track = object_track(ref.frames("reference"), ref.object_masks("reference"), k + 1,
                                   ref.masks("reference"), ref.object_pose("reference", k))
         self._arm: dict[float, object] = {}
-        self.judged = ref.cached(self._judge_reference(backends.judge))
+        self.judged = ref.cached(self._judge_reference(backends.judge), ("score",))
 
     def _judge_reference(self, judge):
         def verdict() -> dict:
