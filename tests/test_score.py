@@ -200,14 +200,16 @@ def test_reference_caches_are_reused_exactly(suites_scores, suites_release, tmp_
         report["platforms"]["maniskill"]["suites"]["t5"]["n"]  # one entry per T4 and T5 instance
     entries = flows + results
     stamps = {p: p.stat().st_mtime_ns for p in entries}
-    damaged = (flows[0], results[0], results[-1], results[1])  # a flow, a T4 result, a T5 result; and a T4
-    for p in damaged[:3]:                                         # result that is JSON lacking a field
+    t4 = [p for p in results if p.parent.name.startswith("t4_")]
+    t5 = [p for p in results if p.parent.name.startswith("t5_")]
+    damaged = (flows[0], t4[0], t5[0], t4[1])  # a flow, a T4 result, a T5 result; and a T4 result that is JSON
+    for p in damaged[:3]:                     # lacking a field
         p.write_bytes(b"not a cache entry")
-    results[1].write_text(json.dumps({"visible_reference": 1.0}))
+    t4[1].write_text(json.dumps({"visible_reference": 1.0}))
     cached = score_submission(sub, suites_release, tmp_path / "cached", progress=False)
     np.load(flows[0]).close()  # rewritten, readable
     assert all(json.loads(p.read_text()) for p in damaged[1:])
-    assert "presence" in json.loads(results[1].read_text())
+    assert "presence" in json.loads(t4[1].read_text())
     assert all(p.stat().st_mtime_ns == stamps[p] for p in entries if p not in damaged)  # read, not recomputed
     fresh = score_submission(sub, suites_release, tmp_path / "fresh", progress=False, reference_cache=False)
     assert "reference_result_cache" in fresh and not fresh["reference_result_cache"]
