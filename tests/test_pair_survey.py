@@ -19,9 +19,9 @@ def test_the_shared_t5_release_reports_its_survey(suites_release):
     cfg = BuildConfig.from_json(report["build_config"])
     survey = report["survey"]
     assert sorted(survey["pairs"]) == sorted(f"PickCube · {p}" for p in T5Builder(cfg).primitives)
-    for pair in survey["pairs"].values():
-        assert pair["passed"] and pair["screened"] == 1 + sum(pair["dropped"].values())
-    assert survey["excluded"] == [] and report["unplanned_slots"] == [] and survey["unrendered_steps"] > 0
+    for pair in survey["pairs"].values():  # a slot per pair: screened unrendered
+        assert pair["passed"] and not pair["rendered"] and pair["screened"] == 1 + sum(pair["dropped"].values())
+    assert survey["excluded"] == [] and report["unplanned_slots"] == [] and survey["simulator_steps"] > 0
     slot_seeds = {cfg.scene_seed(k, a) for k in range(cfg.count) for a in range(cfg.max_attempts)}
     survey_seeds = {cfg.scene_seed(SURVEY_SLOT - i, 0) for i in range(len(survey["pairs"]))}
     assert not slot_seeds & survey_seeds  # the survey's scenes are never a slot's
@@ -34,7 +34,9 @@ def test_an_excluded_pair_is_left_out_of_the_plan():
     builder = T5Builder(cfg)
     pairs = builder.survey_pairs()
     assert {(p.task, p.group) for p in pairs} == {(t, g) for g in builder.primitives for t in builder.compatible(g)}
-    assert survey_units(builder) == [(i, p.task, p.group) for i, p in enumerate(pairs)]
+    assert survey_units(builder) == [(i, p.task, p.group, False) for i, p in enumerate(pairs)]
+    # two slots per pair or more: the survey also renders what passes unrendered (about an instance per pair)
+    assert {u[3] for u in survey_units(T5Builder(BuildConfig("t5", "maniskill", 32, cfg.tasks)))} == {True}
 
     failing = {SlotPlan("PushCube", "push"), SlotPlan("PickCube", "drop")}
     passed = [{"seed": 1, "outcome": "passed", "simulated_steps": 10}]
@@ -56,10 +58,11 @@ def test_an_excluded_pair_is_left_out_of_the_plan():
     report = build_report(cfg, [record], entries)
     assert report["unplanned_slots"] == [drop_slot] and report["exhausted_slots"] == [drop_slot]
     assert survey_report(entries)["excluded"] == ["PushCube · push", "PickCube · drop"]
-    assert report["survey"]["pairs"]["PickCube · drop"] == {"screened": 8, "passed": False,
+    assert report["survey"]["pairs"]["PickCube · drop"] == {"screened": 8, "passed": False, "rendered": False,
                                                             "dropped": {"primitive_not_observed": 8}}
     text = format_report(report)
-    assert "pair survey: 2 of" in text and "PushCube · push" in text and "left empty" in text
+    assert "pair survey: 2 of 16 pairs yield no proposal that passes the checks before rendering" in text
+    assert "PushCube · push" in text and "left empty" in text
     assert "found no valid instance" not in text  # the empty slot is not reported as 8 failed attempts
 
 
@@ -87,7 +90,8 @@ def test_libero_survey_leaves_out_a_task_that_cannot_yield(tmp_path):
     finally:
         builder.close()
     cookie, soup = entries
-    assert screened == [(COOKIE, "pull"), (SOUP, "pull")] and (cookie["task"], soup["task"]) == (COOKIE, SOUP)
+    assert screened == [(COOKIE, "pull", False), (SOUP, "pull", False)]  # a slot per pair: unrendered
+    assert (cookie["task"], soup["task"]) == (COOKIE, SOUP)
     assert len(cookie["attempts"]) == cfg.max_attempts
     assert {a["outcome"] for a in cookie["attempts"]} == {"joint_limit"}
     assert soup["attempts"][-1]["outcome"] == "passed"

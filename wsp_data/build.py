@@ -271,10 +271,11 @@ def format_report(report: dict, max_rows: int = 6) -> str:
         lines.append(f"  … {len(lossy) - max_rows} more task(s) with drops")
     if survey := report.get("survey"):
         excluded, n = survey["excluded"], len(survey["pairs"])
-        lines.append(f"pair survey: {len(excluded)} of {n} pairs yield no proposal that passes before rendering, "
-                     f"left out: {', '.join(excluded[:6])}" + (f" … {len(excluded) - 6} more" if len(excluded) > 6
-                                                              else "")
-                     if excluded else f"pair survey: each of {n} pairs yields a proposal that passes before rendering")
+        checks = ("every check, rendered" if all(p.get("rendered") for p in survey["pairs"].values())
+                  else "the checks before rendering")
+        lines.append(f"pair survey: {len(excluded)} of {n} pairs yield no proposal that passes {checks}, left out: "
+                     f"{', '.join(excluded[:6])}" + (f" … {len(excluded) - 6} more" if len(excluded) > 6 else "")
+                     if excluded else f"pair survey: each of {n} pairs yields a proposal that passes {checks}")
     unplanned = set(report.get("unplanned_slots", []))
     if exhausted := [k for k in report["exhausted_slots"] if k not in unplanned]:
         lines.append(f"{len(exhausted)} slot(s) found no valid instance in "

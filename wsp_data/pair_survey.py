@@ -1,6 +1,7 @@
 """The pair survey: before any slot is decided, every (task, group) pair the config's slots draw from (T5: task and
-primitive; `SuiteBuilder.survey_pairs`) is screened on scenes of its own, unrendered (`SuiteBuilder.screen`: the
-checks a proposal passes before it is rendered), until one proposal passes or `max_attempts` are dropped. A pair
+primitive; `SuiteBuilder.survey_pairs`) is screened on scenes of its own (`SuiteBuilder.screen`: the checks a
+proposal passes before it is rendered, and, in a config of at least `RENDERED_FROM` slots per pair, those on its
+rendered replay too), until one proposal passes or `max_attempts` are dropped. A pair
 none passes is excluded from the plan (`SuiteBuilder.exclude`): its slots go to the group's other pairs, and a slot
 whose group keeps no pair is decided with no attempt. The build report lists every screened pair with its drop
 reasons and the excluded ones (`survey_report`).
@@ -29,31 +30,37 @@ from wsp_eval.console import terminal
 SURVEY_SLOT = SEED_SPAN // MAX_ATTEMPTS - 1  # the survey's first pair screens on this slot's scenes, the next below
 SURVEY_DIR = "survey"
 
-Unit = tuple[int, str, str]  # (pair index, task, group)
+RENDERED_FROM = 2  # slots per pair from which the survey also renders: a pair then has slots enough to pay for it
+
+Unit = tuple[int, str, str, bool]  # (pair index, task, group, rendered)
 
 
 def survey_units(builder: SuiteBuilder) -> list[Unit]:
-    """The builder's survey pairs, each with its index."""
-    return [(i, pair.task, pair.group) for i, pair in enumerate(builder.survey_pairs())]
+    """The builder's survey pairs, each with its index and whether it is screened rendered: when the config has
+    at least `RENDERED_FROM` slots per pair, a screened proposal must also pass the checks made on its rendered
+    replay (`SuiteBuilder.screen(..., rendered=True)`), which costs about one instance per pair that yields."""
+    pairs = builder.survey_pairs()
+    rendered = builder.config.count >= RENDERED_FROM * len(pairs)
+    return [(i, pair.task, pair.group, rendered) for i, pair in enumerate(pairs)]
 
 
 def screen_unit(builder: SuiteBuilder, unit: Unit) -> dict:
-    """Screen one pair: its attempts (scene seed, outcome, unrendered steps) up to the first that passes (`outcome`
+    """Screen one pair: its attempts (scene seed, outcome, simulator steps) up to the first that passes (`outcome`
     "passed") or `max_attempts` dropped."""
     cfg: BuildConfig = builder.config
-    i, task, group = unit
+    i, task, group, rendered = unit
     attempts = []
     for a in range(cfg.max_attempts):
         seed = cfg.scene_seed(SURVEY_SLOT - i, a)
         try:
-            why, steps = builder.screen(SlotPlan(task, group), seed, cfg.rng(SURVEY_SLOT - i, a))
+            why, steps = builder.screen(SlotPlan(task, group), seed, cfg.rng(SURVEY_SLOT - i, a), rendered)
             outcome = "passed" if why is None else why
         except Exception as e:  # noqa: BLE001 - a simulator crash drops the proposal, as in a slot
             outcome, steps = f"simulator_error: {type(e).__name__}", 0
         attempts.append({"seed": seed, "outcome": outcome, "simulated_steps": steps})
         if outcome == "passed":
             break
-    return {"task": task, "group": group, "attempts": attempts}
+    return {"task": task, "group": group, "rendered": rendered, "attempts": attempts}
 
 
 def _unit_path(staging_root: Path, unit: int) -> Path:
@@ -97,14 +104,15 @@ def _passed(entry: dict) -> bool:
 
 def survey_report(entries: list[dict]) -> dict:
     """The build report's `survey`: per pair (`task · group`) the proposals screened, whether one passed and the
-    drop reasons; the excluded pairs; the unrendered steps the survey cost."""
+    drop reasons; the excluded pairs; the simulator steps (rendered or not) the survey cost."""
     pairs = {}
     for e in entries:
         dropped = Counter(a["outcome"] for a in e["attempts"] if a["outcome"] != "passed")
         pairs[f"{e['task']} · {e['group']}"] = {"screened": len(e["attempts"]), "passed": _passed(e),
+                                               "rendered": bool(e.get("rendered")),
                                                "dropped": dict(sorted(dropped.items()))}
     return {"pairs": pairs, "excluded": [k for k, v in pairs.items() if not v["passed"]],
-            "unrendered_steps": sum(a["simulated_steps"] for e in entries for a in e["attempts"])}
+            "simulator_steps": sum(a["simulated_steps"] for e in entries for a in e["attempts"])}
 
 
 def read_survey(staging_root: Path) -> list[dict]:

@@ -165,9 +165,11 @@ class SuiteBuilder(ABC):
         """The pairs the pair survey screens before any slot; none by default."""
         return ()
 
-    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> tuple[str | None, int]:
-        """Unrendered: why a proposal for `plan` at scene seed `seed` is dropped before rendering (None when it
-        passes every check made before rendering: what `attempt` would render), and the unrendered steps spent."""
+    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator,
+               rendered: bool = False) -> tuple[str | None, int]:
+        """Why a proposal for `plan` at scene seed `seed` is dropped before rendering (None when it passes every
+        check made before rendering: what `attempt` would render; with `rendered`, every check `attempt` makes),
+        and the simulator steps spent."""
         raise NotImplementedError(f"{type(self).__name__} has no pair survey")
 
     def exclude(self, pairs: frozenset[SlotPlan]) -> None:

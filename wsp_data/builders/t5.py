@@ -14,7 +14,7 @@ evaluated object's image moves visibly (`wsp_eval.object_track`, spec §4.3), as
 window. Slots are
 balanced exactly by primitive over the platform's primitives (`PlatformKit.t5_primitives`): slot k gets the
 (k mod n)-th and the next of that primitive's compatible tasks (`PlatformKit.t5_primitive_tasks`) in turn, less
-the (task, primitive) pairs the pair survey found no unrendered proposal for (`wsp_data.pair_survey`).
+the (task, primitive) pairs the pair survey found no passing proposal for (`wsp_data.pair_survey`).
 """
 
 from __future__ import annotations
@@ -78,7 +78,12 @@ class T5Builder(SuiteBuilder):
         used = self.primitives[: self.config.count]
         return tuple(SlotPlan(t, p) for p in used for t in self.compatible(p))
 
-    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> tuple[str | None, int]:
+    def screen(self, plan: SlotPlan, seed: int, rng: np.random.Generator,
+               rendered: bool = False) -> tuple[str | None, int]:
+        if rendered:
+            out = self.attempt(plan, seed, rng)
+            steps = out.rendered_steps + out.simulated_steps
+            return (None, steps) if isinstance(out, Kept) else (out.reason, steps)
         rig = self.rig(plan.task, self.kit.t5_scene(plan.group))
         b = rig.branch(plan.group, seed)
         if isinstance(b, Dropped):
