@@ -31,6 +31,10 @@ from wsp_eval.judge_data import t4_clips, t5_clips
 MOVING = ("push", "pull", "drag", "tap", "knock-over", "drop")
 FROZEN_TRAINED = ("maniskill", "libero", "aloha")  # every platform's weights are trained with frozen-object negatives
 ENSEMBLE = str(Path(__file__).resolve().parents[1] / "scripts" / "ensemble_judge.py")
+# tasks whose every T5 pair the pair survey leaves out (every primitive on the bowl beside the cookie box drives the
+# arm past a joint limit: 0 of 64 proposals in two builds; tests/test_pair_survey.py checks that the survey finds it)
+SURVEY_EXCLUDED = {
+    "libero": ("libero_spatial/pick_up_the_black_bowl_next_to_the_cookie_box_and_place_it_on_the_plate",)}
 
 
 @pytest.fixture(scope="module")
@@ -68,14 +72,18 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform, rol
     there (on LIBERO a network whose builds missed pairs confused pulls with drops, 33 of 41 fresh references), and
     an ensemble member that never saw them undoes much of what the others learned; so every member must have seen
     every pair, and so must an object verifier that judges every label (LIBERO's). Planned, not kept: a slot may
-    still have failed every attempt."""
-    from wsp_data.builders.base import BuildConfig
+    still have failed every attempt. The pairs the pair survey leaves out (`SURVEY_EXCLUDED`) are neither buildable
+    nor planned, as in a build."""
+    from wsp_data.builders.base import BuildConfig, SlotPlan
     from wsp_data.builders.t5 import T5Builder
     from wsp_data.platforms import kit
 
     platform_kit = kit(platform)
+    excluded = frozenset(SlotPlan(t, p) for p in platform_kit.t5_primitives()
+                         for t in SURVEY_EXCLUDED.get(platform, ()))
     buildable = {(task, primitive) for primitive, tasks in
-                 platform_kit.t5_primitive_tasks(tuple(platform_kit.tasks())).items() for task in tasks}
+                 platform_kit.t5_primitive_tasks(tuple(platform_kit.tasks())).items() for task in tasks
+                 if SlotPlan(task, primitive) not in excluded}
     record = json.loads(WHOLE_WEIGHTS[platform, role].with_suffix(".json").read_text())
     for member in [m["record"] for m in record.get("ensemble_of", [])] or [record]:
         planned = set()
@@ -84,6 +92,7 @@ def test_the_weights_trained_on_every_task_and_primitive_t5_builds(platform, rol
             if config:
                 builder = T5Builder(BuildConfig("t5", platform, config["count"], tuple(config["tasks"]),
                                                 primitives=tuple(config.get("primitives", ()))))
+                builder.exclude(excluded)
                 planned |= {(p.task, p.group) for p in map(builder.plan, range(config["count"]))}
         assert buildable - planned == set(), member["weights"]
 
