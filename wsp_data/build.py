@@ -152,10 +152,10 @@ def _worker_screen(unit: pair_survey.Unit) -> tuple[pair_survey.Unit, dict]:
     return unit, pair_survey.screen_unit(_WORKER["builder"], unit)
 
 
-def _worker_decide(task: tuple[int, list[list[str]]]) -> SlotRecord:
+def _worker_decide(task: tuple[int, frozenset[SlotPlan]]) -> SlotRecord:
     slot, excluded = task
     builder = _WORKER["builder"]
-    builder.exclude(frozenset(SlotPlan(*pair) for pair in excluded))
+    builder.exclude(excluded)
     return decide_slot(builder, _WORKER["staging"], slot)
 
 
@@ -191,8 +191,7 @@ def decide_slots(config: BuildConfig, staging: Staging, slots: list[int], worker
     with ctx.Pool(workers, initializer=_worker_init, initargs=(config.to_json(), str(staging.root))) as pool:
         excluded = survey(builder_class(config.suite)(config), staging,
                           lambda units: pool.imap_unordered(_worker_screen, units), progress)
-        pairs = sorted([p.task, p.group] for p in excluded)
-        yield from pool.imap_unordered(_worker_decide, [(slot, pairs) for slot in slots])
+        yield from pool.imap_unordered(_worker_decide, [(slot, excluded) for slot in slots])
 
 
 # -- report ---------------------------------------------------------------------------------------------

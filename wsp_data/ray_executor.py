@@ -44,14 +44,14 @@ def _screen(task: tuple[dict, tuple]) -> tuple[tuple, dict]:
     return unit, screen_unit(_builder(config_json), unit)
 
 
-def _decide(task: tuple[dict, list, int]) -> tuple[SlotRecord, dict[str, bytes]]:
+def _decide(task: tuple[dict, frozenset[SlotPlan], int]) -> tuple[SlotRecord, dict[str, bytes]]:
     """In a Ray worker: decide slot `task[2]` with this process's builder for the config `task[0]`, the survey's
     excluded pairs `task[1]` left out; the kept rollouts come back encoded, by role."""
     from wsp_data.build import decide
 
     config_json, excluded, slot = task
     builder = _builder(config_json)
-    builder.exclude(frozenset(SlotPlan(*pair) for pair in excluded))
+    builder.exclude(excluded)
     record, rollouts = decide(builder, slot)
     return record, {r.role: r.encode() for r in rollouts}
 
@@ -66,7 +66,6 @@ def run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: 
     cfg = config.to_json()
     excluded = survey(builder_class(config.suite)(config), staging,
                       lambda units: ray_imap(_screen, [(cfg, unit) for unit in units], workers, address), progress)
-    pairs = sorted([p.task, p.group] for p in excluded)
-    for record, rollouts in ray_imap(_decide, [(cfg, pairs, slot) for slot in slots], workers, address):
+    for record, rollouts in ray_imap(_decide, [(cfg, excluded, slot) for slot in slots], workers, address):
         staging.write_encoded(record, rollouts)
         yield record
