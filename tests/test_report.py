@@ -115,3 +115,12 @@ def test_minimal_report_does_not_crash():
     assert "| T1 Local action calibration | 50.0 | — | — | 0 |" in markdown(minimal)
     assert html(minimal).count("<svg") == 1
     assert baseline_table({"m": minimal}).count("—") == 5
+
+
+def test_a_score_just_outside_its_ci_is_plotted():
+    """A balanced mean can fall just outside its bootstrap interval (seen on a T5 config whose every instance scores
+    100 but one at 99.99): the chart draws a zero-length bar on that side instead of failing."""
+    report = make_report()
+    report["platforms"]["maniskill"]["suites"]["t4"] = _suite("Interaction grounding", 100.0, [99.9, 99.99], 16,
+                                                              _groups("kind", ["a", "b", "c"], 60))
+    assert html(report).count("<svg") == 1 + 7 + 2

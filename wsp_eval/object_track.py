@@ -12,7 +12,10 @@ frame nearest in time, spec §4.1):
    masked sum of squared differences, sub-pixel by a parabola through the minimum and its neighbours) inside the
    search region, the box of the reference's templates grown by `MARGIN` template sizes; p̂_t is that match's
    place of the projected position (the template's centroid moved by the reference's offset p*_t − centroid_t).
-   A video without the object there matches it somewhere else in the region, or at the place it stayed.
+   A video without the object there matches it somewhere else in the region, or at the place it stayed. The
+   templates are drawn at the generated video's own sharpness (`sharpness`: the level of `BLURS` at which the
+   blurred reference best matches the video's scene away from the robot and the objects), so that a video drawn
+   softer than the simulator matches templates as soft as itself, not sharp ones.
 3. Relative errors, against the reference's own motion, over the used frames (p_0: the first used frame):
    - an object whose image travels at least `MIN_TRAVEL` (per 128 px of frame height): x = max(x_d, x_v), with the
      displacement error x_d = RMS_t ‖(p̂_t − p̂_0) − (p*_t − p*_0)‖ / RMS_t ‖p*_t − p*_0‖ (a constant offset of the
@@ -21,8 +24,9 @@ frame nearest in time, spec §4.1):
    - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE` in the image):
      x = max(x_r, RMS_t ‖p̂_t − p*_t‖ / MIN_TRAVEL) with x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is
      the angle of `ANGLES` at which the first used template, turned, best matches the frame at the object's
-     position (measured alike on both videos, on frames smoothed only by `TURN_SMOOTH`; angles modulo a quarter
-     turn): it must turn as the reference's does and stay where the reference's is.
+     position (measured alike on both videos, on frames smoothed only by `TURN_SMOOTH`, the reference's at the
+     video's sharpness; angles modulo a quarter turn): it must turn as the reference's does and stay where the
+     reference's is.
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -53,6 +57,8 @@ LAG = 4  # frames (0.2 s at 20 Hz): the velocity error's step
 ANGLES = np.deg2rad(np.arange(-45.0, 45.1, 3.0))  # in-plane rotations tried (a box's image repeats every 90°)
 ROT_VISIBLE = 0.2  # rad: a reference whose object turns at least this far in the image is scored on rotation too
 TURN_SMOOTH = 1.0  # px per 128 px: the lighter smoothing the rotation is measured on (3 px leaves a blob)
+BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)  # px per 128: the sharpness levels a generated video is matched at
+SHARPNESS_MARGIN = 8.0  # px per 128: robot and object pixels grown by this are left out of the sharpness estimate
 X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise and a 1 px blur stay below it)
 X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response of 30 % of the reference's is above)
 
@@ -67,6 +73,15 @@ class Template(NamedTuple):
     centre: np.ndarray
 
 
+class Level(NamedTuple):
+    """The reference drawn at one blur level: a template per frame (None where too little of the object is
+    visible), the first used template turned by each of ANGLES, and the rotation θ*_t of every used frame."""
+
+    templates: list[Template | None]
+    turns: list[Template]
+    angles: np.ndarray
+
+
 class ObjectTrack(NamedTuple):
     """The reference side: a template per used sample (None where too little of the object is visible)."""
 
@@ -77,6 +92,9 @@ class ObjectTrack(NamedTuple):
     angles: np.ndarray  # θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)
     points: np.ndarray  # (T, 2): the object's projected position in every frame, seen or not
     true_turn: np.ndarray  # (T,): its simulator rotation about the camera's axis since frame 0, seen or not (rad)
+    frames: np.ndarray  # (T, H, W, 3) uint8: the reference frames
+    scene: np.ndarray  # (T, H, W) bool: the pixels of the sharpness estimate (neither robot nor object, grown)
+    levels: dict  # blur level → its Level, filled on first use (`at_blur`)
 
     @property
     def used(self) -> list[int]:
@@ -173,26 +191,74 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     true_turn = image_turn(poses[:, 3:], pose.extrinsic)
     h = frames.shape[1]
     least = MIN_PIXELS * (h / 128) ** 2
-    out: list[Template | None] = []
-    for i in range(len(frames)):
-        frame = smoothed(frames[i])
-        visible = (labels[i] == label) & (robot[i] == 0)
-        if visible.sum() < least:
-            out.append(None)
+    robot = robot > 0
+    visible = [(labels[i] == label) & ~robot[i] for i in range(len(frames))]
+    visible = [v if v.sum() >= least else None for v in visible]
+    sharp = _drawn(frames, visible, 0.0, turns=True)
+    grow = int(np.ceil(SHARPNESS_MARGIN * h / 128))
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
+    scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
+                      for i in range(len(frames))])
+    return ObjectTrack(sharp.templates, frames.shape[1:3], search_region(sharp.templates, frames.shape[1:3]),
+                       sharp.turns, sharp.angles, points, true_turn, frames, scene, {0.0: sharp})
+
+
+def _drawn(frames: np.ndarray, visible: list, blur: float, turns: bool) -> Level:
+    """The templates of the frames' visible object pixels (None where too few) and, with `turns`, the first one's
+    turns and the reference's rotations, drawn from the frames blurred by `blur` (px per 128) before the matching's
+    smoothing."""
+    templates: list[Template | None] = []
+    for frame, v in zip(frames, visible):
+        if v is None:
+            templates.append(None)
             continue
-        ys, xs = np.nonzero(visible)
+        ys, xs = np.nonzero(v)
         y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-        out.append(Template((int(x0), int(y0)), frame[y0:y1, x0:x1],
-                            visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
-    used = [k for k, t in enumerate(out) if t is not None]
-    turns = []
-    if used:
-        t0 = out[used[0]]
-        (x0, y0), (th, tw) = t0.origin, t0.mask.shape
-        turns = turned(t0._replace(pixels=smoothed(frames[used[0]], TURN_SMOOTH)[y0:y0 + th, x0:x0 + tw]))
-    angles = np.array([orientation(smoothed(frames[k], TURN_SMOOTH), turns, out[k].centre) for k in used])
-    return ObjectTrack(out, frames.shape[1:3], search_region(out, frames.shape[1:3]), turns, angles, points,
-                       true_turn)
+        templates.append(Template((int(x0), int(y0)), smoothed(frame, float(np.hypot(SMOOTH, blur)))[y0:y1, x0:x1],
+                                  v[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
+    used = [k for k, t in enumerate(templates) if t is not None]
+    if not used or not turns:
+        return Level(templates, [], np.zeros(0))
+    turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
+    t0 = templates[used[0]]
+    (x0, y0), (th, tw) = t0.origin, t0.mask.shape
+    turns = turned(t0._replace(pixels=smoothed(frames[used[0]], turn_sigma)[y0:y0 + th, x0:x0 + tw]))
+    angles = np.array([orientation(smoothed(frames[k], turn_sigma), turns, templates[k].centre) for k in used])
+    return Level(templates, turns, angles)
+
+
+def at_blur(track: ObjectTrack, blur: float, turns: bool) -> Level:
+    """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), with `turns` its turns and
+    rotations too (level 0 always has them)."""
+    if blur not in track.levels or (turns and not track.levels[blur].turns):
+        visible = [None if t is None else _full_mask(t, track.size) for t in track.templates]
+        track.levels[blur] = _drawn(track.frames, visible, blur, turns)
+    return track.levels[blur]
+
+
+def _full_mask(t: Template, size: tuple[int, int]) -> np.ndarray:
+    out = np.zeros(size, bool)
+    (x0, y0), (h, w) = t.origin, t.mask.shape
+    out[y0:y0 + h, x0:x0 + w] = t.mask > 0
+    return out
+
+
+def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
+    """The blur level of BLURS at which the reference's scene (its pixels away from the robot and the objects, at
+    every LAG-th frame of the common duration) best matches the generated video: how sharply the video is drawn."""
+    ks = range(0, min(len(frame_idx), len(track.frames)), LAG)
+    scale = track.size[0] / 128
+    costs = []
+    for blur in BLURS:
+        total = 0.0
+        for k in ks:
+            ref = track.frames[k].astype(np.float32)
+            if blur > 0:
+                ref = cv2.GaussianBlur(ref, (0, 0), blur * scale)
+            diff = ref - frames[frame_idx[k]].astype(np.float32)
+            total += float(np.sum(diff[track.scene[k]] ** 2))
+        costs.append(total)
+    return BLURS[int(np.argmin(costs))]
 
 
 def turned(t: Template) -> list[Template]:
@@ -278,24 +344,27 @@ class Positions(NamedTuple):
     reference_turn: np.ndarray
     frames: list[int]
     scale: float  # frame height / 128
+    blur: float  # the video's blur level (px per 128) the templates were drawn at
 
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
     """Where and how turned a generated video shows the object; `frame_idx[k]` is its frame shown at the time of the
-    reference's frame k."""
+    reference's frame k. The templates are drawn at the video's own sharpness (`sharpness`)."""
     used = [k for k in track.used if k < len(frame_idx)]
     if not used:
         raise ValueError("the reference object is never in sight")
     by_turn = not track.moving and track.turning  # an object turning in place: its rotation is what can be seen
+    blur = sharpness(frames, track, frame_idx)
+    level = at_blur(track, blur, by_turn)
     found, turn = [], []
     for k in used:
-        frame, t = frames[frame_idx[k]], track.templates[k]
+        frame, t = frames[frame_idx[k]], level.templates[k]
         centroid = locate(smoothed(frame), t, track.region)
         found.append(centroid + (track.points[k] - t.centre))
-        turn.append(orientation(smoothed(frame, TURN_SMOOTH), track.turns, centroid) if by_turn else 0.0)
+        turn.append(orientation(smoothed(frame, TURN_SMOOTH), level.turns, centroid) if by_turn else 0.0)
     return Positions(np.array(found), track.points[used], np.array(turn),
-                     quarter_turn(track.angles[: len(used)] - track.angles[0]) if by_turn else np.zeros(len(used)),
-                     used, track.size[0] / 128)
+                     quarter_turn(level.angles[: len(used)] - level.angles[0]) if by_turn else np.zeros(len(used)),
+                     used, track.size[0] / 128, blur)
 
 
 def relative_error(p: Positions) -> float:

@@ -25,7 +25,7 @@ TITLES = {"t1": "Local action calibration", "t2": "Global trajectory coverage",
           "t3": "Action-source behaviour preservation", "t4": "Interaction grounding",
           "t5": "Interaction dynamics"}
 DASH = "—"
-JUDGE_FALSE_ACCEPT = "49–69 %"  # of generated-video negatives, by platform (docs/validity.md, T5: `wsp study t5-negatives`)
+JUDGE_FALSE_ACCEPT = "49–67 %"  # of generated-video negatives, by platform (docs/validity.md, T5: `wsp study t5-negatives`)
 SVG_RC = {"svg.fonttype": "none"}  # text stays text: no font files, small, searchable
 SVG_METADATA = {"Date": None, "Creator": None, "Format": None, "Type": None}
 
@@ -191,12 +191,13 @@ def _svg(fig: plt.Figure, salt: str) -> str:
 
 
 def _yerr(entries: Sequence[dict]) -> list[list[float]]:
-    """Asymmetric error bars from each entry's CI; NaN (no bar) where the CI or score is missing."""
+    """Asymmetric error bars from each entry's CI; NaN (no bar) where the CI or score is missing, 0 on a side where
+    the score lies outside its CI (a balanced mean can fall just outside its bootstrap interval)."""
     lo, hi = [], []
     for e in entries:
         ok = e.get("ci") and e.get("score") is not None
-        lo.append(e["score"] - e["ci"][0] if ok else math.nan)
-        hi.append(e["ci"][1] - e["score"] if ok else math.nan)
+        lo.append(max(0.0, e["score"] - e["ci"][0]) if ok else math.nan)
+        hi.append(max(0.0, e["ci"][1] - e["score"]) if ok else math.nan)
     return [lo, hi]
 
 

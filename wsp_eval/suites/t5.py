@@ -66,14 +66,15 @@ def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
     duration = min(prepared.duration, clip_duration(len(frames), fps))
     ref_times = timestamps(prepared.ref.num_frames("reference"), prepared.ref.fps)
     shown = nearest_indices(timestamps(len(frames), fps), ref_times[ref_times <= duration + 1e-9])
-    x = relative_error(positions(frames, prepared.track, shown))
+    found = positions(frames, prepared.track, shown)
+    x = relative_error(found)
     object_fidelity = fidelity(x)
     arm_ref = prepared.arm(duration)
     arm = mean_window_score(score_windows(video_flows(frames, fps, duration, backends.flow, arm_ref.needed),
                                           arm_ref)) or 0.0
     recognised, verdict = _judge(frames, prepared.row, prepared.platform, backends.judge)
     score = object_fidelity * min(1.0, arm / ARM_FULL)
-    return score, {"object_fidelity": round(object_fidelity, 3), "object_error": round(x, 4),
+    return score, {"object_fidelity": round(object_fidelity, 3), "object_error": round(x, 4), "object_blur": found.blur,
                    "arm_rmfa": round(arm, 3), "recognised": recognised, **verdict}
 
 
