@@ -117,11 +117,12 @@ def test_a_video_drawn_softer_reads_its_blur_and_keeps_its_object(releases, plat
     for ref in _references(releases(platform), platform):
         prepared = t5.prepare(ref, backends)
         frames = ref.frames("reference")
-        for video, expected in ((frames, 0.0), (np.repeat(frames[:1], len(frames), 0), 0.0), (blur(frames), level)):
+        for video, expected in ((frames, 0.0), (np.repeat(frames[:1], len(frames), 0), 0.0)):
             _, detail = t5.score_seed(prepared, {"reference": (video, ref.fps)}, backends)
             assert detail["object_blur"] == expected, (ref.row["instance_id"], expected, detail)
+        _, detail = t5.score_seed(prepared, {"reference": (blur(frames), ref.fps)}, backends)
+        assert detail["object_blur"] == level, (ref.row["instance_id"], level, detail)
         if prepared.track.moving:
-            _, detail = t5.score_seed(prepared, {"reference": (blur(frames), ref.fps)}, backends)
             assert detail["object_fidelity"] == 100.0, (ref.row["instance_id"], ref.row["primitive"], detail)
 
 

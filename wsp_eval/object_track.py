@@ -83,18 +83,31 @@ class Level(NamedTuple):
 
 
 class ObjectTrack(NamedTuple):
-    """The reference side: a template per used sample (None where too little of the object is visible)."""
+    """The reference side: its templates at each blur level drawn so far (level 0, the reference's own sharpness,
+    always), where the object is, and what the sharpness estimate compares."""
 
-    templates: list[Template | None]
     size: tuple[int, int]  # (H, W) of the reference frames
     region: tuple[int, int, int, int]  # (x0, y0, x1, y1): where the generated video's object is looked for
-    turns: list[Template]  # the first used template turned by each of ANGLES
-    angles: np.ndarray  # θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)
     points: np.ndarray  # (T, 2): the object's projected position in every frame, seen or not
     true_turn: np.ndarray  # (T,): its simulator rotation about the camera's axis since frame 0, seen or not (rad)
     frames: np.ndarray  # (T, H, W, 3) uint8: the reference frames
     scene: np.ndarray  # (T, H, W) bool: the pixels of the sharpness estimate (neither robot nor object, grown)
     levels: dict  # blur level → its Level, filled on first use (`at_blur`)
+
+    @property
+    def templates(self) -> list[Template | None]:
+        """A template per frame at the reference's sharpness (None where too little of the object is visible)."""
+        return self.levels[0.0].templates
+
+    @property
+    def turns(self) -> list[Template]:
+        """The first used template turned by each of ANGLES."""
+        return self.levels[0.0].turns
+
+    @property
+    def angles(self) -> np.ndarray:
+        """θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)."""
+        return self.levels[0.0].angles
 
     @property
     def used(self) -> list[int]:
@@ -192,30 +205,33 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     h = frames.shape[1]
     least = MIN_PIXELS * (h / 128) ** 2
     robot = robot > 0
-    visible = [(labels[i] == label) & ~robot[i] for i in range(len(frames))]
-    visible = [v if v.sum() >= least else None for v in visible]
-    sharp = _drawn(frames, visible, 0.0, turns=True)
+    templates: list[Template | None] = []
+    for i in range(len(frames)):
+        visible = (labels[i] == label) & ~robot[i]
+        if visible.sum() < least:
+            templates.append(None)
+            continue
+        ys, xs = np.nonzero(visible)
+        y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+        templates.append(Template((int(x0), int(y0)), smoothed(frames[i])[y0:y1, x0:x1],
+                                  visible[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
     grow = int(np.ceil(SHARPNESS_MARGIN * h / 128))
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
     scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
                       for i in range(len(frames))])
-    return ObjectTrack(sharp.templates, frames.shape[1:3], search_region(sharp.templates, frames.shape[1:3]),
-                       sharp.turns, sharp.angles, points, true_turn, frames, scene, {0.0: sharp})
+    return ObjectTrack(frames.shape[1:3], search_region(templates, frames.shape[1:3]), points, true_turn, frames,
+                       scene, {0.0: _level(frames, templates, 0.0, turns=True)})
 
 
-def _drawn(frames: np.ndarray, visible: list, blur: float, turns: bool) -> Level:
-    """The templates of the frames' visible object pixels (None where too few) and, with `turns`, the first one's
-    turns and the reference's rotations, drawn from the frames blurred by `blur` (px per 128) before the matching's
-    smoothing."""
-    templates: list[Template | None] = []
-    for frame, v in zip(frames, visible):
-        if v is None:
-            templates.append(None)
-            continue
-        ys, xs = np.nonzero(v)
-        y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-        templates.append(Template((int(x0), int(y0)), smoothed(frame, float(np.hypot(SMOOTH, blur)))[y0:y1, x0:x1],
-                                  v[y0:y1, x0:x1].astype(np.uint8), np.array([xs.mean(), ys.mean()])))
+def _level(frames: np.ndarray, templates: list[Template | None], blur: float, turns: bool) -> Level:
+    """`templates` (the reference's, at its own sharpness) redrawn from the frames blurred by `blur` (px per 128)
+    before the matching's smoothing and, with `turns`, the first one's turns and the reference's rotations."""
+    if blur > 0:
+        sigma = float(np.hypot(SMOOTH, blur))
+        templates = [None if t is None else
+                     t._replace(pixels=smoothed(frame, sigma)[t.origin[1]:t.origin[1] + t.mask.shape[0],
+                                                             t.origin[0]:t.origin[0] + t.mask.shape[1]])
+                     for frame, t in zip(frames, templates)]
     used = [k for k, t in enumerate(templates) if t is not None]
     if not used or not turns:
         return Level(templates, [], np.zeros(0))
@@ -231,33 +247,21 @@ def at_blur(track: ObjectTrack, blur: float, turns: bool) -> Level:
     """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), with `turns` its turns and
     rotations too (level 0 always has them)."""
     if blur not in track.levels or (turns and not track.levels[blur].turns):
-        visible = [None if t is None else _full_mask(t, track.size) for t in track.templates]
-        track.levels[blur] = _drawn(track.frames, visible, blur, turns)
+        track.levels[blur] = _level(track.frames, track.templates, blur, turns)
     return track.levels[blur]
-
-
-def _full_mask(t: Template, size: tuple[int, int]) -> np.ndarray:
-    out = np.zeros(size, bool)
-    (x0, y0), (h, w) = t.origin, t.mask.shape
-    out[y0:y0 + h, x0:x0 + w] = t.mask > 0
-    return out
 
 
 def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
     """The blur level of BLURS at which the reference's scene (its pixels away from the robot and the objects, at
     every LAG-th frame of the common duration) best matches the generated video: how sharply the video is drawn."""
-    ks = range(0, min(len(frame_idx), len(track.frames)), LAG)
     scale = track.size[0] / 128
-    costs = []
-    for blur in BLURS:
-        total = 0.0
-        for k in ks:
-            ref = track.frames[k].astype(np.float32)
-            if blur > 0:
-                ref = cv2.GaussianBlur(ref, (0, 0), blur * scale)
-            diff = ref - frames[frame_idx[k]].astype(np.float32)
-            total += float(np.sum(diff[track.scene[k]] ** 2))
-        costs.append(total)
+    costs = np.zeros(len(BLURS))
+    for k in range(0, min(len(frame_idx), len(track.frames)), LAG):
+        ref, scene = track.frames[k].astype(np.float32), track.scene[k]
+        shown = frames[frame_idx[k]].astype(np.float32)[scene]
+        for i, blur in enumerate(BLURS):
+            drawn = cv2.GaussianBlur(ref, (0, 0), blur * scale) if blur > 0 else ref
+            costs[i] += float(np.sum((drawn[scene] - shown) ** 2))
     return BLURS[int(np.argmin(costs))]
 
 
