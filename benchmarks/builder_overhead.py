@@ -6,7 +6,8 @@ seconds of this process (`time.process_time`: robust to other work on the machin
 
 - script: the expert's scripted episode (end-effector control, unrendered), which makes the action stream;
 - render: the rendered replay — the "bare simulator" cost: reset, step and render, with the observations read;
-- checks: the spec §5 validity checks; stage: the rollout's arrays encoded as they are staged;
+- checks: the spec §5 validity checks; stage: the rollout encoded as it is staged (its video, label PNGs and
+  arrays);
 - verify (not part of the total): the expert's unrendered verifying replay, which the train builder skips (the
   rendered replay checks success itself); the other suites run it first.
 
@@ -23,6 +24,7 @@ import time
 from collections import defaultdict
 
 from wsp_data.builders.rig import TaskRig
+from wsp_data.platforms import kit
 from wsp_data.platforms.maniskill.skills import verify
 from wsp_data.schema import scene_seed
 from wsp_data.staging import RolloutArrays
@@ -40,7 +42,7 @@ def instance(rig: TaskRig, seed: int) -> tuple[dict[str, float], int] | None:
     cpu["render"], t = time.process_time() - t, time.process_time()
     problem = rig.invalid(ro)
     cpu["checks"], t = time.process_time() - t, time.process_time()
-    RolloutArrays.from_rollout("expert", ro).encode()
+    RolloutArrays.from_rollout("expert", ro).encode(kit("maniskill").info.fps)
     cpu["stage"] = time.process_time() - t
     cpu["wall"], t = time.perf_counter() - start, time.process_time()
     verify(rig.expert.replayer, seed, actions)

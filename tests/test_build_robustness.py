@@ -69,6 +69,9 @@ def test_slots_record_their_cpu_and_a_build_from_two_cpu_types_says_so(tmp_path,
     assert second.returncode == 0, second.stderr
     assert "slots were decided on 2 CPU types" in second.stdout
     assert re.search(r"peak memory of a build worker \d+\.\d GB", second.stdout)
+    assert "the config written" not in first.stdout  # shard 0 left the config to the last shard
+    written = re.search(r"the config written in (\d+\.\d) s \((\d+)% of this run\)", second.stdout)
+    assert written and float(written[1]) > 0 and 0 <= int(written[2]) <= 100
     built_on = json.loads((out / "t1_maniskill" / "build_report.json").read_text())["built_on"]
     assert built_on == {"Other CPU (x86_64)": [0], cpu_model(): [1]}
 

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from wsp_data import pair_survey
 from wsp_data.builders import BUILDERS, BuildConfig, Kept, SlotPlan, builder_class
 from wsp_data.machine import cpu_model, mixed_cpus_warning, peak_rss_mb
+from wsp_data.platforms import kit
 from wsp_data.release import ReleaseError, load_release, record_build, write_release
 from wsp_data.schema import BUILD_REPORT, INSTANCE_ID, LOG_DIR, RELEASE_JSON, STAGING_DIR
 from wsp_data.staging import CONFIG_JSON, RolloutArrays, SlotRecord, Staging
@@ -51,6 +52,7 @@ class BuildResult:
     up_to_date: bool = False  # the config was already assembled from this very build config
     peak_worker_rss_mb: float = 0.0  # the largest peak resident memory of a process that decided a slot now
     log: Path | None = None  # library, simulator and encoder output of this build
+    assembly_seconds: float = 0.0  # of `seconds`: writing the config from its staged slots
 
 
 # -- output folder checks ------------------------------------------------------------------------------
@@ -133,9 +135,9 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
 
 
 def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
-    """`decide` one slot and stage the decision atomically."""
+    """`decide` one slot and stage the decision atomically, its rollouts' pictures encoded."""
     record, rollouts = decide(builder, slot)
-    staging.write_slot(record, rollouts)
+    staging.write_slot(record, rollouts, kit(builder.config.platform).info.fps)
     return record
 
 
@@ -289,8 +291,8 @@ def format_report(report: dict, max_rows: int = 6) -> str:
 
 # -- assembly -------------------------------------------------------------------------------------------
 def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1, progress: bool = False) -> dict:
-    """Write the config from its decided slots (reading and encoding on `workers` threads; a bar of instances
-    written when `progress`), its build report and the release-level files; then remove the staging."""
+    """Write the config from its decided slots (read on `workers` threads; a bar of instances written when
+    `progress`), its build report and the release-level files; then remove the staging."""
     records = [staging.read_slot(k) for k in range(config.count)]
     kept = sum(r.kept for r in records)
     if not kept:
@@ -299,7 +301,7 @@ def assemble(config: BuildConfig, out: Path, staging: Staging, workers: int = 1,
     instances = tqdm(staging.read_kept(records, workers), total=kept, desc=f"write {config.name}", unit="instance",
                      disable=not progress, file=terminal())
     with instances:
-        write_config(out / config.name, config.name, config.platform, instances, workers)
+        write_config(out / config.name, config.name, config.platform, instances)
     report = build_report(config, records, pair_survey.read_survey(staging.root))
     (out / config.name / BUILD_REPORT).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n")
     record_build(out, config.name, config.to_json())
@@ -360,13 +362,15 @@ def _build_locked(config: BuildConfig, out: Path, index: int, total: int, worker
         bar.close()
         remaining = sum(not staging.is_decided(k) for k in range(config.count))
         report = None
+        t_assembly = time.perf_counter()
         if remaining == 0:  # one assembly at a time into a release: each rewrites release.json
             with folder_lock.exclusive(out / LOG_DIR, f"wsp build {config.name} (assembling)", "assemble.lock",
                                        wait=True):
                 if staging.root.exists():  # else another shard of this config has just assembled it
                     report = assemble(config, out, staging, workers, progress)
-    return BuildResult(config, out, decided, kept, remaining, report is not None, time.perf_counter() - t0,
-                       steps, report, log=log, peak_worker_rss_mb=peak)
+        end = time.perf_counter()
+    return BuildResult(config, out, decided, kept, remaining, report is not None, end - t0, steps, report, log=log,
+                       peak_worker_rss_mb=peak, assembly_seconds=end - t_assembly if report is not None else 0.0)
 
 
 def default_workers() -> int:

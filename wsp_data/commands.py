@@ -110,8 +110,10 @@ def cmd_build(args) -> int:
     per = result.seconds / max(1, result.rendered_steps) * 1000
     memory = (f"; peak memory of a build worker {result.peak_worker_rss_mb / 1024:.1f} GB"
               if result.peak_worker_rss_mb else "")
+    assembly = (f"; the config written in {result.assembly_seconds:.1f} s "
+                f"({result.assembly_seconds / max(result.seconds, 1e-9):.0%} of this run)" if result.assembled else "")
     print(f"decided {result.decided_now} slot(s) in {result.seconds:.1f} s; {result.rendered_steps} rendered steps "
-          f"({per:.0f} ms per rendered step, all costs included){memory}")
+          f"({per:.0f} ms per rendered step, all costs included){memory}{assembly}")
     if result.assembled:
         print(format_report(result.report))
         from wsp_data.schema import BUILD_REPORT

@@ -2,14 +2,15 @@
 
 Each slot is one Ray task (one CPU): a worker process keeps the builder of the build config it last served
 (simulators are created once per process, as in the local pool; a task of another config closes it first),
-decides the slot and returns the decision with the kept rollouts encoded as the npz files they are staged as;
-the driver writes them (`Staging.write_encoded`, atomic, as a local build does), so decided slots travel back
-through Ray's object store and no shared file system is needed. Encoding in the worker matters: compressing a
-slot's frames costs ≈ 0.3-0.5 s, which a driver doing it for every slot turned into the build's bottleneck
-(measured: Ray stopped scaling at ≈ 2.5 slots/s on 16 cores while the process pool reached 6), and the
-compressed files are ≈ 40× smaller than the arrays to send between nodes; resume works as for a local build (the driver's staging folder is the
-record). A slot's decision depends only on (build config, slot), so the release is byte-identical to a local
-build of the same config. Every node needs the build extra.
+decides the slot and returns the decision with the kept rollouts encoded as the npz files they are staged as
+(videos and label PNGs included); the driver writes them (`Staging.write_encoded`, atomic, as a local build does),
+so decided slots travel back through Ray's object store and no shared file system is needed. Encoding in the
+worker matters: encoding a slot's pictures costs ≈ 0.5 s per rollout, which a driver doing it for every slot would
+turn into the build's bottleneck (measured when staging compressed raw frames: Ray stopped scaling at ≈ 2.5
+slots/s on 16 cores while the process pool reached 6), and the encoded files are far smaller than the arrays to
+send between nodes (≈ 0.5 MB for a 94-frame ALOHA rollout whose frames and masks hold 36 MB); resume works as for
+a local build (the driver's staging folder is the record). A slot's decision depends only on (build config,
+slot), so the release is byte-identical to a local build of the same config. Every node needs the build extra.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import json
 from collections.abc import Iterator
 
 from wsp_data.builders import BuildConfig, SlotPlan, builder_class
+from wsp_data.platforms import kit
 from wsp_data.staging import SlotRecord, Staging
 
 _builders: dict[str, object] = {}
@@ -53,7 +55,8 @@ def _decide(task: tuple[dict, frozenset[SlotPlan], int]) -> tuple[SlotRecord, di
     builder = _builder(config_json)
     builder.exclude(excluded)
     record, rollouts = decide(builder, slot)
-    return record, {r.role: r.encode() for r in rollouts}
+    fps = kit(builder.config.platform).info.fps
+    return record, {r.role: r.encode(fps) for r in rollouts}
 
 
 def run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int,

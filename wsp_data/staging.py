@@ -1,9 +1,11 @@
 """Crash-safe per-slot staging: the resumable state of a build.
 
 A builder decides slots one at a time. A decided slot is a folder `slot_NNNNNN/` holding `slot.json`
-(its attempts, drop reasons and, when kept, the instance row) and one `<role>.npz` per rollout. The folder
-is written under a temporary name and renamed into place, so a killed build loses at most the slot in
-flight and never leaves a half-written slot behind. Assembly into LeRobot reads only decided slots.
+(its attempts, drop reasons and, when kept, the instance row) and one `<role>.npz` per rollout: its episode
+arrays, its video already encoded as the release holds it and its label masks as PNGs (`wsp_data.episode_codec`;
+the worker that decides the slot encodes, so assembly only writes). The folder is written under a temporary name
+and renamed into place, so a killed build loses at most the slot in flight and never leaves a half-written slot
+behind. Assembly into LeRobot reads only decided slots.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from wsp_data.episode_codec import encode_pngs, encode_video, pack, unpack
 from wsp_data.platforms import Rollout
 
 T, R = TypeVar("T"), TypeVar("R")
@@ -54,23 +57,65 @@ class RolloutArrays:
                    ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
                    ro.alt_actions, ro.intrinsic, ro.extrinsic)
 
-    @property
-    def num_frames(self) -> int:
-        return len(self.rgb)
-
-    def encode(self) -> bytes:
-        """The rollout as the compressed npz file it is staged as (compressing is most of staging's cost: a
-        worker encodes, so a driver that only writes the bytes does not serialise the build)."""
-        arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray)}
+    def encode(self, fps: int) -> bytes:
+        """The rollout as the npz file it is staged as (`StagedRollout`): the pictures encoded (most of staging's
+        cost: a worker encodes, so a driver that only writes the bytes does not serialise the build)."""
+        arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in PICTURES}
+        video, stats = encode_video(self.rgb, fps)
+        masks, mask_ends = pack(encode_pngs(self.mask))
+        objects, object_ends = pack(encode_pngs(self.objects))
         buffer = io.BytesIO()
-        np.savez_compressed(buffer, role=np.array(self.role), seed=np.array(self.seed), **arrays)
+        np.savez(buffer, role=np.array(self.role), seed=np.array(self.seed), **arrays,
+                 video=np.frombuffer(video, np.uint8), **{STATS + k: np.asarray(v) for k, v in stats.items()},
+                 mask_pngs=masks, mask_png_ends=mask_ends, object_pngs=objects, object_png_ends=object_ends)
         return buffer.getvalue()
 
+
+PICTURES = ("rgb", "mask", "objects")  # staged encoded (video, PNGs), not as arrays
+STATS = "video_stats."  # the npz key prefix of the video's statistics
+
+
+@dataclass
+class StagedRollout:
+    """A rollout as staged (`RolloutArrays.encode`) and assembled: its episode arrays, its video (mp4 bytes and
+    LeRobot's statistics of its frames) and its robot and object label masks as one PNG per frame."""
+
+    role: str
+    seed: int
+    qpos: np.ndarray
+    tcp_pose: np.ndarray
+    object_poses: np.ndarray
+    contacts: np.ndarray
+    success: np.ndarray
+    actions: np.ndarray
+    alt_actions: np.ndarray
+    intrinsic: np.ndarray
+    extrinsic: np.ndarray
+    video: bytes
+    video_stats: dict[str, np.ndarray]
+    mask_pngs: list[bytes]
+    object_pngs: list[bytes]
+
+    @property
+    def num_frames(self) -> int:
+        return len(self.qpos)
+
     @classmethod
-    def load(cls, path: Path) -> RolloutArrays:
-        with np.load(path) as z:
+    def load(cls, path: Path) -> StagedRollout:
+        return cls.decode(path.read_bytes(), str(path))
+
+    @classmethod
+    def decode(cls, data: bytes, name: str = "staged rollout") -> StagedRollout:
+        """The rollout `RolloutArrays.encode` staged as `data` (`name`: the file it came from, for errors)."""
+        with np.load(io.BytesIO(data)) as z:
             d = {k: z[k] for k in z.files}
-        return cls(role=str(d.pop("role")), seed=int(d.pop("seed")), **d)
+        if "video" not in d:
+            raise ValueError(f"{name}: staged by an earlier wsp (frames not encoded); build this config again "
+                             "with --restart")
+        return cls(role=str(d.pop("role")), seed=int(d.pop("seed")), video=d.pop("video").tobytes(),
+                   video_stats={k[len(STATS):]: d.pop(k) for k in list(d) if k.startswith(STATS)},
+                   mask_pngs=unpack(d.pop("mask_pngs"), d.pop("mask_png_ends")),
+                   object_pngs=unpack(d.pop("object_pngs"), d.pop("object_png_ends")), **d)
 
 
 @dataclass
@@ -101,8 +146,8 @@ class Staging:
     def is_decided(self, slot: int) -> bool:
         return (self.slot_dir(slot) / SLOT_JSON).exists()
 
-    def write_slot(self, record: SlotRecord, rollouts: list[RolloutArrays]) -> None:
-        self.write_encoded(record, {r.role: r.encode() for r in rollouts})
+    def write_slot(self, record: SlotRecord, rollouts: list[RolloutArrays], fps: int) -> None:
+        self.write_encoded(record, {r.role: r.encode(fps) for r in rollouts})
 
     def write_encoded(self, record: SlotRecord, rollouts: dict[str, bytes]) -> None:
         """Stage a decided slot whose rollouts are already encoded (`RolloutArrays.encode`, by role)."""
@@ -123,11 +168,11 @@ class Staging:
         except (json.JSONDecodeError, TypeError) as e:
             raise ValueError(f"{path}: corrupt slot record ({e}); delete the slot folder to rebuild it") from e
 
-    def read_rollouts(self, slot: int, roles: list[str]) -> list[RolloutArrays]:
-        return [RolloutArrays.load(self.slot_dir(slot) / f"{role}.npz") for role in roles]
+    def read_rollouts(self, slot: int, roles: list[str]) -> list[StagedRollout]:
+        return [StagedRollout.load(self.slot_dir(slot) / f"{role}.npz") for role in roles]
 
     def read_kept(self, records: Iterable[SlotRecord],
-                  workers: int = 1) -> Iterator[tuple[SlotRecord, list[RolloutArrays]]]:
+                  workers: int = 1) -> Iterator[tuple[SlotRecord, list[StagedRollout]]]:
         """(record, rollouts) of each kept record, in order, read by `workers` threads."""
         kept = (r for r in records if r.kept)
         return ordered_ahead(lambda r: (r, self.read_rollouts(r.slot, r.roles)), kept, workers)

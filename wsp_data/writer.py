@@ -3,17 +3,16 @@ own API (near-lossless h264 yuv444p crf 0 video), `wsp.*` episode columns in its
 `masks.parquet` (PNG robot and object label masks, outside LeRobot's features) and `instances.parquet` (one row per
 instance).
 
-Writes are deterministic (same staged input → byte-identical files, whatever the number of workers) and atomic
-per config: the dataset is written beside its final place and swapped in when complete. LeRobot appends each
-episode's video to its file by re-muxing the whole file, quadratic in episodes per file; so it writes one video
-file per episode here, and `_pack_videos` joins them into files of LeRobot's default size, each muxed once
-(linear).
+Writes are deterministic (same staged input → byte-identical files in any folder) and atomic per config: the
+dataset is written beside its final place and swapped in when complete. LeRobot appends each episode's video to
+its file by re-muxing the whole file, quadratic in episodes per file; so it writes one video file per episode
+here, and `_pack_videos` joins them into files of LeRobot's default size, each muxed once (linear).
 
-Parallel where it can be: `workers` processes encode episodes ahead of the writer (`encode_episode`: the video
-and its image statistics by LeRobot's own streaming encoder, `StreamingVideoEncoder`, on one x264 thread; the
-label masks' PNGs). The writer process (LeRobot's frame table, episode metadata and running statistics) stays
-serial, as LeRobot writes its dataset files in episode order; it takes the finished videos through LeRobot's
-streaming-encoder interface (`_AheadVideos`).
+The pictures arrive encoded: the worker that decided a slot encoded its videos (with their image statistics) and
+label masks when it staged them (`wsp_data.episode_codec`), on as many processes or Ray nodes as the slots. What
+is left here is serial, as LeRobot writes its dataset files in episode order: its frame table, episode metadata
+and running statistics. It takes the finished videos through LeRobot's streaming-encoder interface
+(`_AheadVideos`).
 """
 
 from __future__ import annotations
@@ -25,36 +24,36 @@ import logging
 import shutil
 from collections import deque
 from collections.abc import Iterable
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from wsp_data.episode_codec import REFERENCE_VIDEO_CODEC
 from wsp_data.platforms import kit
 from wsp_data.schema import (
     CONTACTS_KEY, EPISODE_ID, INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, OBJECT_POSES_KEY, SOURCE_ROLE,
     PlatformInfo,
     frame_features,
 )
-from wsp_data.staging import RolloutArrays, SlotRecord, ordered_ahead
+from wsp_data.staging import SlotRecord, StagedRollout
 
-REFERENCE_VIDEO_CODEC = dict(vcodec="h264", pix_fmt="yuv444p", crf=0)
 EPISODE_TABLES = "meta/episodes/*/*.parquet"  # LeRobot's episode table files
 ONE_EPISODE_PER_FILE = 1e-9  # a video file size limit (MB) every episode exceeds: LeRobot starts a new file for each
-Instance = tuple[SlotRecord, list[RolloutArrays]]  # a kept slot and its rollouts
+Instance = tuple[SlotRecord, list[StagedRollout]]  # a kept slot and its rollouts
+EPISODE_VIDEOS = ".episode-videos"  # where each staged video waits for LeRobot to move it into the dataset
 TRAIN_SPLIT, TEST_SPLIT = "train", "test"  # LeRobot info.json `splits`: training configs, scored configs
 
 
-def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
+def _frames(r: StagedRollout, instruction: str, info: PlatformInfo, picture: np.ndarray):
+    """LeRobot frames of `r`; the video key holds `picture` (a blank of the frame's shape: LeRobot checks its
+    shape and hands it to `_AheadVideos`, which ignores it, as the video is already encoded)."""
     last = len(r.actions) - 1
     for t in range(r.num_frames):
         a = min(t, last)  # the final frame repeats the last action (never executed)
         yield {
-            info.video_key: r.rgb[t],
+            info.video_key: picture,
             "observation.state": r.qpos[t],
             "observation.ee_pose": r.tcp_pose[t],
             OBJECT_POSES_KEY: np.nan_to_num(r.object_poses[t], nan=0.0).reshape(-1),  # unused slots: zeros
@@ -66,10 +65,8 @@ def _frames(r: RolloutArrays, instruction: str, info: PlatformInfo):
         }
 
 
-def write_config(config_dir: Path, config: str, platform: str,
-                 instances: Iterable[Instance], workers: int = 1) -> int:
-    """Write `config_dir` from kept slots (in slot order); returns the number of episodes written. `workers`
-    processes encode the episodes (videos, statistics, mask PNGs) ahead of the writer."""
+def write_config(config_dir: Path, config: str, platform: str, instances: Iterable[Instance]) -> int:
+    """Write `config_dir` from kept slots (in slot order); returns the number of episodes written."""
     from lerobot.configs.video import RGBEncoderConfig
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from lerobot.datasets.video_utils import StreamingVideoEncoder
@@ -78,8 +75,9 @@ def write_config(config_dir: Path, config: str, platform: str,
     tmp = config_dir.with_name(config_dir.name + ".writing")
     shutil.rmtree(tmp, ignore_errors=True)
     logging.getLogger("lerobot").setLevel(logging.WARNING)
+    features = frame_features(info)
     ds = LeRobotDataset.create(
-        f"worldsimprobe/{config}", fps=info.fps, features=frame_features(info), root=tmp,
+        f"worldsimprobe/{config}", fps=info.fps, features=features, root=tmp,
         robot_type=info.robot_type, use_videos=True, rgb_encoder=RGBEncoderConfig(**REFERENCE_VIDEO_CODEC),
         video_files_size_in_mb=ONE_EPISODE_PER_FILE, streaming_encoding=True,
     )
@@ -87,21 +85,26 @@ def write_config(config_dir: Path, config: str, platform: str,
         raise RuntimeError("this lerobot's dataset writer has no streaming encoder to hand encoded videos to; "
                            "install the lerobot version pinned in pyproject.toml")
     ahead = ds.writer._streaming_encoder = _AheadVideos(info.video_key)
+    picture = np.zeros(features[info.video_key]["shape"], np.uint8)
+    videos = tmp / EPISODE_VIDEOS
+    videos.mkdir()
     episode_rows: list[dict] = []
     instance_rows: list[dict] = []
-    with (contextlib.closing(_MaskWriter(tmp / MASKS)) as masks,  # closed also when a step below raises
-          _encoder(info.fps, tmp, workers) as encode):
-        for record, rollouts, encoded in ordered_ahead(encode, instances, workers):
+    with contextlib.closing(_MaskWriter(tmp / MASKS)) as masks:  # closed also when a step below raises
+        for record, rollouts in instances:
             row = dict(record.row)
             indices = []
-            for r, e in zip(rollouts, encoded, strict=True):
+            for r in rollouts:
                 index = len(episode_rows)
-                ahead.ready.append((e.video, e.stats))
+                video = videos / f"{index:06d}" / "video.mp4"  # a folder each: LeRobot removes it with the video
+                video.parent.mkdir()
+                video.write_bytes(r.video)
+                ahead.ready.append((video, r.video_stats))
                 with contextlib.redirect_stderr(io.StringIO()):
-                    for frame in _frames(r, row["instruction"], info):
+                    for frame in _frames(r, row["instruction"], info, picture):
                         ds.add_frame(frame)
                     ds.save_episode(parallel_encoding=False)
-                masks.add(index, e.mask_pngs, e.object_pngs)
+                masks.add(index, r.mask_pngs, r.object_pngs)
                 indices.append(index)
                 episode_rows.append({
                     "wsp.episode_id": EPISODE_ID.format(index=index), "wsp.instance_id": row["instance_id"],
@@ -126,6 +129,7 @@ def write_config(config_dir: Path, config: str, platform: str,
                 row.update(source_episode_index=source[0], source_episode_id=EPISODE_ID.format(index=source[0]))
             instance_rows.append(row)
         ds.finalize()
+    videos.rmdir()  # LeRobot moved every video into the dataset and removed its folder
     for row, video in zip(episode_rows, _pack_videos(tmp, info.video_key), strict=True):
         row.update(video)
     _set_info(tmp / "meta" / "info.json", TRAIN_SPLIT if config.startswith("train_") else TEST_SPLIT)
@@ -138,48 +142,9 @@ def write_config(config_dir: Path, config: str, platform: str,
     return len(episode_rows)
 
 
-@dataclass(frozen=True)
-class Encoded:
-    """One episode encoded ahead of the writer: its mp4 (alone in a temporary folder), LeRobot's per-channel
-    statistics of its frames, and its robot and object label masks as PNG files (`masks.parquet`'s cells)."""
-
-    video: Path
-    stats: dict
-    mask_pngs: list[bytes]
-    object_pngs: list[bytes]
-
-
-def encode_episode(rgb: np.ndarray, mask: np.ndarray, objects: np.ndarray, fps: int, folder: Path) -> Encoded:
-    """Encode one episode (runs in a worker process): the video by LeRobot's streaming encoder with the reference
-    codec on one x264 thread (the same bytes in any process), into a new temporary folder under `folder`, and the
-    label masks as PNGs."""
-    import av
-    from lerobot.configs.video import RGBEncoderConfig
-    from lerobot.datasets.video_utils import StreamingVideoEncoder
-    from PIL import Image
-
-    encoder = StreamingVideoEncoder(fps, RGBEncoderConfig(**REFERENCE_VIDEO_CODEC), queue_maxsize=len(rgb) + 1,
-                                    encoder_threads=1)  # the queue holds every frame: none is ever dropped
-    encoder.start_episode(["video"], folder)
-    for frame in rgb:
-        encoder.feed_frame("video", frame)
-    path, stats = encoder.finish_episode()["video"]
-    with av.open(str(path)) as container:
-        frames = container.streams.video[0].frames
-    if stats is None or frames != len(rgb):
-        raise RuntimeError(f"{path}: the encoder wrote {frames} of {len(rgb)} frames")
-
-    def png(m: np.ndarray) -> bytes:
-        buf = io.BytesIO()
-        Image.fromarray(np.ascontiguousarray(m, dtype=np.uint8), mode="L").save(buf, format="PNG")
-        return buf.getvalue()
-
-    return Encoded(path, stats, [png(m) for m in mask], [png(m) for m in objects])
-
-
 class _AheadVideos:
     """Stands in for LeRobot's `StreamingVideoEncoder` inside its dataset writer: the episode's video was encoded
-    ahead (`encode_episode`), so the frames fed here are ignored and `finish_episode` hands over the finished file."""
+    when its slot was staged, so the frames fed here are ignored and `finish_episode` hands over the finished file."""
 
     def __init__(self, key: str):
         self.key, self.ready = key, deque()
@@ -199,27 +164,6 @@ class _AheadVideos:
 
     def close(self) -> None:
         pass
-
-
-@contextlib.contextmanager
-def _encoder(fps: int, folder: Path, workers: int):
-    """`encode(instance) -> (record, rollouts, [Encoded per rollout])`: in this process for one worker, else in a
-    pool of `workers` processes (spawned: the writer's threads make forking unsafe)."""
-    pool = ProcessPoolExecutor(workers, mp_context=get_context("spawn")) if workers > 1 else None
-
-    def episode(r: RolloutArrays) -> Encoded:
-        args = (r.rgb, r.mask, r.objects, fps, folder)
-        return pool.submit(encode_episode, *args).result() if pool else encode_episode(*args)
-
-    def encode(instance: Instance) -> tuple[SlotRecord, list[RolloutArrays], list[Encoded]]:
-        record, rollouts = instance
-        return record, rollouts, [episode(r) for r in rollouts]
-
-    try:
-        yield encode
-    finally:
-        if pool:
-            pool.shutdown(cancel_futures=True)
 
 
 class _MaskWriter:
