@@ -13,8 +13,11 @@ import time
 import pytest
 
 from conftest import TINY, release_files as _files, tiny_build_command as _build_args
+from wsp_data.build import BuildError, open_staging, prepare_output
+from wsp_data.builders import BuildConfig
 from wsp_data.machine import cpu_model
 from wsp_data.schema import RELEASE_JSON, STAGING_DIR
+from wsp_data.staging import FORMAT_FILE, SLOT_JSON
 
 WSP = [sys.executable, "-m", "wsp_eval.cli"]
 
@@ -128,6 +131,22 @@ def test_half_written_release_with_other_config_is_not_overwritten(tmp_path):
     r = _wsp(*_build_args(out)[3:])
     assert r.returncode == 2 and "different configuration" in r.stderr and "--restart" in r.stderr
     assert (staged / "slot_000000" / "slot.json").exists()  # nothing lost
+
+
+def test_a_staging_left_by_an_earlier_wsp_is_refused_before_any_slot(tmp_path):
+    """An earlier wsp staged raw frames, which this one cannot assemble: resuming such a build stops at once with
+    the count of decided slots and `--restart`, not after deciding the rest."""
+    config = BuildConfig("t1", "maniskill", 2, ("PickCube",))
+    out = prepare_output(tmp_path / "worldsimprobe")
+    staging = open_staging(out, config, restart=False)
+    assert staging.has_current_format()
+    (staging.root / FORMAT_FILE).unlink()  # the folder as an earlier wsp left it
+    staging.slot_dir(0).mkdir()
+    (staging.slot_dir(0) / SLOT_JSON).write_text(json.dumps({"slot": 0, "attempts": [], "row": None, "roles": []}))
+    with pytest.raises(BuildError, match=r"earlier wsp.*--restart to discard its 1 decided slot"):
+        open_staging(out, config, restart=False)
+    assert open_staging(out, config, restart=True).has_current_format()
+    assert not staging.is_decided(0)
 
 
 def test_corrupt_release_json_names_the_file(tmp_path):

@@ -95,8 +95,14 @@ def open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
                 f"{staging.root}: an unfinished build of {config.name} with a different configuration is staged "
                 f"({json.dumps(previous, sort_keys=True)}). Re-run with those arguments to resume it, or pass "
                 f"--restart to discard it.")
+        if not staging.has_current_format():
+            decided = sum(staging.is_decided(k) for k in range(config.count))
+            raise BuildError(f"{staging.root}: an unfinished build of {config.name} staged by an earlier wsp, whose "
+                             f"staged slots this one cannot assemble; pass --restart to discard its {decided} decided "
+                             "slot(s) and build again.")
     else:
         staging.root.mkdir(parents=True, exist_ok=True)
+        staging.mark_format()  # before the config: a folder with a config is one this wsp can resume
         cfg_path.write_text(json.dumps(config.to_json(), indent=1, sort_keys=True))
     staging.clean_partial()
     return staging

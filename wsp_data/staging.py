@@ -30,6 +30,7 @@ T, R = TypeVar("T"), TypeVar("R")
 SLOT_DIR = "slot_{slot:06d}"
 SLOT_JSON = "slot.json"
 CONFIG_JSON = "build_config.json"
+FORMAT_FILE, FORMAT = "staging_format", "2"  # 2: rollouts staged with their pictures encoded (`RolloutArrays.encode`)
 
 
 @dataclass
@@ -102,16 +103,13 @@ class StagedRollout:
 
     @classmethod
     def load(cls, path: Path) -> StagedRollout:
-        return cls.decode(path.read_bytes(), str(path))
+        return cls.decode(path.read_bytes())
 
     @classmethod
-    def decode(cls, data: bytes, name: str = "staged rollout") -> StagedRollout:
-        """The rollout `RolloutArrays.encode` staged as `data` (`name`: the file it came from, for errors)."""
+    def decode(cls, data: bytes) -> StagedRollout:
+        """The rollout `RolloutArrays.encode` staged as `data`."""
         with np.load(io.BytesIO(data)) as z:
             d = {k: z[k] for k in z.files}
-        if "video" not in d:
-            raise ValueError(f"{name}: staged by an earlier wsp (frames not encoded); build this config again "
-                             "with --restart")
         return cls(role=str(d.pop("role")), seed=int(d.pop("seed")), video=d.pop("video").tobytes(),
                    video_stats={k[len(STATS):]: d.pop(k) for k in list(d) if k.startswith(STATS)},
                    mask_pngs=unpack(d.pop("mask_pngs"), d.pop("mask_png_ends")),
@@ -142,6 +140,14 @@ class Staging:
 
     def slot_dir(self, slot: int) -> Path:
         return self.root / SLOT_DIR.format(slot=slot)
+
+    def mark_format(self) -> None:
+        (self.root / FORMAT_FILE).write_text(FORMAT + "\n")
+
+    def has_current_format(self) -> bool:
+        """Whether this wsp staged the folder (an earlier one staged raw frames, which assembly cannot read)."""
+        path = self.root / FORMAT_FILE
+        return path.exists() and path.read_text().strip() == FORMAT
 
     def is_decided(self, slot: int) -> bool:
         return (self.slot_dir(slot) / SLOT_JSON).exists()
