@@ -31,8 +31,11 @@ from wsp_data.staging import SLOT_JSON
 
 
 def slot_digest(slot_dir: Path) -> str:
-    """The staged decision of one slot: its record and its arrays (not the npz container bytes)."""
-    h = hashlib.sha256((slot_dir / SLOT_JSON).read_bytes())
+    """The staged decision of one slot: its record (less the deciding process's peak memory, which differs between
+    runs) and its arrays (not the npz container bytes)."""
+    record = json.loads((slot_dir / SLOT_JSON).read_text())
+    record.pop("peak_rss_mb", None)
+    h = hashlib.sha256(json.dumps(record, sort_keys=True).encode())
     for npz in sorted(slot_dir.glob("*.npz")):
         with np.load(npz) as z:
             for key in sorted(z.files):
