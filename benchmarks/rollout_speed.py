@@ -76,5 +76,6 @@ def main() -> None:
               f"episode ({encode / rd:.2f}× a rendered rollout); LeRobot write (parquet, metadata): {per:.2f} s "
               f"({per / rd:.2f}×)")
 
+
 if __name__ == "__main__":
     main()

@@ -54,7 +54,7 @@ def test_an_excluded_pair_is_left_out_of_the_plan():
     drop_slot = builder.primitives.index("drop")
     assert builder.plan(drop_slot) is None
     record, rollouts = decide(builder, drop_slot)
-    assert record.attempts == [] and not record.kept and rollouts == []
+    assert record.attempts == [] and not record.kept and rollouts == {}
     report = build_report(cfg, [record], entries)
     assert report["unplanned_slots"] == [drop_slot] and report["exhausted_slots"] == [drop_slot]
     assert survey_report(entries)["excluded"] == ["PushCube · push", "PickCube · drop"]

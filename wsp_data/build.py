@@ -109,8 +109,9 @@ def open_staging(out: Path, config: BuildConfig, restart: bool) -> Staging:
 
 
 # -- slot decisions -------------------------------------------------------------------------------------
-def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
-    """Try attempts for one slot until one is kept: the decision and the kept instance's rollouts."""
+def decide(builder, slot: int) -> tuple[SlotRecord, dict[str, bytes]]:
+    """Try attempts for one slot until one is kept: the decision and the kept instance's rollouts encoded as they
+    are staged (`RolloutArrays.encode`, by role; the pictures encoded here, in the deciding process)."""
     cfg: BuildConfig = builder.config
     plan = builder.plan(slot)
     record = SlotRecord(slot, cpu=cpu_model())
@@ -136,14 +137,15 @@ def decide(builder, slot: int) -> tuple[SlotRecord, list[RolloutArrays]]:
             record.roles = [r.role for r in out.rollouts]
             rollouts = out.rollouts
             break
+    encoded = {r.role: r.encode(kit(cfg.platform).info.fps) for r in rollouts}
     record.peak_rss_mb = peak_rss_mb()
-    return record, rollouts
+    return record, encoded
 
 
 def decide_slot(builder, staging: Staging, slot: int) -> SlotRecord:
-    """`decide` one slot and stage the decision atomically, its rollouts' pictures encoded."""
-    record, rollouts = decide(builder, slot)
-    staging.write_slot(record, rollouts, kit(builder.config.platform).info.fps)
+    """`decide` one slot and stage the decision atomically."""
+    record, encoded = decide(builder, slot)
+    staging.write_encoded(record, encoded)
     return record
 
 

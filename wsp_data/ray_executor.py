@@ -19,7 +19,6 @@ import json
 from collections.abc import Iterator
 
 from wsp_data.builders import BuildConfig, SlotPlan, builder_class
-from wsp_data.platforms import kit
 from wsp_data.staging import SlotRecord, Staging
 
 _builders: dict[str, object] = {}
@@ -54,9 +53,7 @@ def _decide(task: tuple[dict, frozenset[SlotPlan], int]) -> tuple[SlotRecord, di
     config_json, excluded, slot = task
     builder = _builder(config_json)
     builder.exclude(excluded)
-    record, rollouts = decide(builder, slot)
-    fps = kit(builder.config.platform).info.fps
-    return record, {r.role: r.encode(fps) for r in rollouts}
+    return decide(builder, slot)
 
 
 def run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: int,

@@ -152,9 +152,6 @@ class Staging:
     def is_decided(self, slot: int) -> bool:
         return (self.slot_dir(slot) / SLOT_JSON).exists()
 
-    def write_slot(self, record: SlotRecord, rollouts: list[RolloutArrays], fps: int) -> None:
-        self.write_encoded(record, {r.role: r.encode(fps) for r in rollouts})
-
     def write_encoded(self, record: SlotRecord, rollouts: dict[str, bytes]) -> None:
         """Stage a decided slot whose rollouts are already encoded (`RolloutArrays.encode`, by role)."""
         final = self.slot_dir(record.slot)
