@@ -130,10 +130,24 @@ def test_t1_response(t1_release, t1_reports, tmp_path, capsys):
             at = [k for k, e in enumerate(entries) if round(e[1], 9) == point["magnitude"]]
             assert point["model"]["mean"] == pytest.approx(model[at].mean()) and point["model"]["n"] == len(at)
             assert point["simulator"]["mean"] == pytest.approx(sim[at].mean())
+        # each instance's side of r*, from the report's own per-seed r and the row's r*
+        sides = a["pooled"]["sides"]
+        recs = _records(folder, "t1")
+        ratio = [np.mean([s["r"] for s in rec["seeds"] if s["r"] is not None]) / rows[rec["instance_id"]]["r_star"]
+                 for rec in recs if any(s["r"] is not None for s in rec["seeds"])]
+        assert sides["instances"] == len(recs)
+        assert sides["under"] == pytest.approx(sum(x < 1 for x in ratio) / len(recs))
+        assert sides["compressed"] == pytest.approx(sum(x > 1 for x in ratio) / len(recs))
+        assert sides["no_response"] == pytest.approx(1 - len(ratio) / len(recs))
+        assert sides["median_ratio"] == (pytest.approx(float(np.median(ratio))) if ratio else None)
     oracle, noise, static = (result[f"baseline:{n}"]["pooled"]["compression"] for n in ("oracle", "noise", "static"))
     assert oracle["slope"] == pytest.approx(1.0, abs=0.02)  # the references respond as the simulator does
     assert noise["slope"] < 0.5 and noise["ci"][1] < oracle["ci"][0]  # added noise compresses the response
     assert static["slope"] == 0.0  # no response at all
+    sides = {n: result[f"baseline:{n}"]["pooled"]["sides"] for n in ("oracle", "noise", "static")}
+    assert sides["oracle"]["median_ratio"] == pytest.approx(1.0, abs=0.05)  # T1 99.9: r is r* within codec noise
+    assert sides["noise"]["compressed"] == 1.0  # the same added distance to both variants: r near 1, above r*
+    assert sides["static"]["no_response"] == 1.0 and sides["static"]["median_ratio"] is None
 
 
 def test_ordering(t1_release, t1_reports, tmp_path, capsys):

@@ -10,6 +10,11 @@ instances, pooled over the config's tasks and per task. The **compression factor
 of the model's relative response on the simulator's over all variants, with a 95 % bootstrap CI over instances
 (both variants of an instance resampled together): 1 follows the simulator's scaling, 0 responds the same to
 every perturbation, between them the response is compressed.
+
+Which side of the simulator's ratio the model falls on, per instance: T1's own r = D(ĝ⁰, ĝˢ)/D(ĝ⁰, ĝˡ) (mean over
+seeds) against r* = D(x⁰, xˢ)/D(x⁰, xˡ). r < r* under-expresses the small perturbation (a dead zone), r > r*
+answers both alike (compressed toward r = 1), no response at all has no r. The shares of each and the median
+r / r* with a 95 % bootstrap CI over instances: T1 scores r / r* below r*, and (1 − r)/(1 − r*) above it.
 """
 
 from __future__ import annotations
@@ -38,11 +43,25 @@ def variants(report: dict, release: Path, config: str) -> list[dict]:
         row = rows.get(rec["instance_id"])
         if row is None:
             raise StudyError(f"{report['path']}: {rec['instance_id']} is not in {release / config}")
+        ratios = [s["d_os"] / s["d_ol"] for s in seeds if s["d_ol"] > 0]
         for variant, key, magnitude in VARIANTS:
             out.append({"instance_id": rec["instance_id"], "task": row["task"], "variant": variant,
                         "magnitude": round(float(row[magnitude]), 9), "simulator": float(row[key]),
-                        "model": float(np.mean([s[key] for s in seeds])) if seeds else 0.0})
+                        "model": float(np.mean([s[key] for s in seeds])) if seeds else 0.0,
+                        "r": float(np.mean(ratios)) if ratios else None, "r_star": float(row["r_star"])})
     return out
+
+
+def sides(entries: list[dict]) -> dict:
+    """Per instance r against r*: the shares with r < r* (small under-expressed), r > r* (compressed) and no
+    response, and the median r / r* with its bootstrap CI over the instances that respond."""
+    first = {e["instance_id"]: e for e in entries if e["variant"] == "small"}
+    n = len(first)
+    ratio = np.array([e["r"] / e["r_star"] for e in first.values() if e["r"] is not None])
+    return {"instances": n, "under": float((ratio < 1).sum() / n), "compressed": float((ratio > 1).sum() / n),
+            "no_response": float((n - len(ratio)) / n),
+            "median_ratio": float(np.median(ratio)) if len(ratio) else None,
+            "median_ratio_ci": bootstrap_ci(lambda i: float(np.median(ratio[i])), len(ratio))}
 
 
 def relative(entries: list[dict]) -> None:
@@ -82,7 +101,7 @@ def analyse(entries: list[dict]) -> dict:
     relative(entries)
 
     def both(chosen: list[dict]) -> dict:
-        return {"curve": curve(chosen), "compression": compression(chosen)}
+        return {"curve": curve(chosen), "compression": compression(chosen), "sides": sides(chosen)}
 
     tasks = sorted({e["task"] for e in entries})
     return {"pooled": both(entries), "per_task": {t: both([e for e in entries if e["task"] == t]) for t in tasks},
@@ -106,24 +125,43 @@ def run(release: Path, reports: list[Path], out: Path) -> dict:
 
 
 def figure(result: dict, path: Path) -> None:
+    """Per config: the relative response per magnitude (top) and each instance's r against r* (bottom, log axes)."""
     plt = pyplot()
     configs = sorted(result["configs"])
-    fig, axes = plt.subplots(1, len(configs), figsize=(5 * len(configs), 4), squeeze=False)
-    for ax, config in zip(axes[0], configs):
+    fig, axes = plt.subplots(2, len(configs), figsize=(5 * len(configs), 8), squeeze=False)
+    for top, bottom, config in zip(axes[0], axes[1], configs):
         models = result["configs"][config]
         first = next(iter(models.values()))["pooled"]["curve"]
-        ax.errorbar([p["magnitude"] for p in first], [p["simulator"]["mean"] for p in first],
-                    yerr=_yerr([p["simulator"] for p in first]), color="black", marker="s", capsize=3,
-                    label="simulator", linewidth=2)
+        top.errorbar([p["magnitude"] for p in first], [p["simulator"]["mean"] for p in first],
+                     yerr=_yerr([p["simulator"] for p in first]), color="black", marker="s", capsize=3,
+                     label="simulator", linewidth=2)
+        plotted = False
         for name, a in models.items():
             c = a["pooled"]["curve"]
             k = a["pooled"]["compression"]["slope"]
-            ax.errorbar([p["magnitude"] for p in c], [p["model"]["mean"] for p in c],
-                        yerr=_yerr([p["model"] for p in c]), marker="o", capsize=3, label=f"{name} (slope {_f(k)})")
-        ax.set_title(config)
-        ax.set_xlabel("perturbation magnitude (native units)")
-        ax.set_ylabel("relative response D / task mean")
-        ax.legend(fontsize=7)
+            line = top.errorbar([p["magnitude"] for p in c], [p["model"]["mean"] for p in c],
+                                yerr=_yerr([p["model"] for p in c]), marker="o", capsize=3,
+                                label=f"{name} (slope {_f(k)})")
+            pairs = [(e["r_star"], e["r"]) for e in a["variants"]
+                     if e["variant"] == "small" and e["r"] is not None and e["r"] > 0]
+            if pairs:
+                bottom.scatter(*zip(*pairs), s=14, color=line[0].get_color(), alpha=0.8,
+                               label=f"{name} (median r/r* {_f(a['pooled']['sides']['median_ratio'])})")
+                plotted = True
+        top.set_title(config)
+        top.set_xlabel("perturbation magnitude (native units)")
+        top.set_ylabel("relative response D / task mean")
+        top.legend(fontsize=7)
+        if not plotted:
+            bottom.text(0.5, 0.5, "no model responds", ha="center", transform=bottom.transAxes)
+            continue
+        bottom.set_xscale("log")
+        bottom.set_yscale("log")
+        lo, hi = min(bottom.get_xlim()[0], bottom.get_ylim()[0]), max(bottom.get_xlim()[1], bottom.get_ylim()[1])
+        bottom.plot([lo, hi], [lo, hi], color="black", linewidth=1, label="r = r*")
+        bottom.set_xlabel("r* (simulator)")
+        bottom.set_ylabel("r (model): below the line the small perturbation is under-expressed", fontsize=8)
+        bottom.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -135,15 +173,21 @@ def _yerr(stats: list[dict]) -> np.ndarray:
     return np.clip(np.array([lo, hi]), 0, None)
 
 
+def _ci(ci: list[float] | None) -> str:
+    return f" [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else ""
+
+
 def _f(x: float | None) -> str:
     return "—" if x is None else f"{x:.2f}"
 
 
 def markdown(result: dict) -> str:
-    lines = ["| config | model | compression slope [95 % CI] | instances |", "|---|---|---|---|"]
+    lines = ["| config | model | compression slope [95 % CI] | r < r* | r > r* | no response | median r / r* [95 % CI] "
+             "| instances |", "|---|---|---|---:|---:|---:|---|---:|"]
     for config, models in sorted(result["configs"].items()):
         for name, a in models.items():
-            k = a["pooled"]["compression"]
-            ci = f" [{k['ci'][0]:.2f}, {k['ci'][1]:.2f}]" if k["ci"] else ""
-            lines.append(f"| {config} | {name} | {_f(k['slope'])}{ci} | {k['instances']} |")
+            k, s = a["pooled"]["compression"], a["pooled"]["sides"]
+            lines.append(f"| {config} | {name} | {_f(k['slope'])}{_ci(k['ci'])} | {s['under']:.0%} | "
+                         f"{s['compressed']:.0%} | {s['no_response']:.0%} | {_f(s['median_ratio'])}"
+                         f"{_ci(s['median_ratio_ci'])} | {k['instances']} |")
     return "\n".join(lines) + "\n"
