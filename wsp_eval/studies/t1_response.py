@@ -43,7 +43,7 @@ def variants(report: dict, release: Path, config: str) -> list[dict]:
         row = rows.get(rec["instance_id"])
         if row is None:
             raise StudyError(f"{report['path']}: {rec['instance_id']} is not in {release / config}")
-        ratios = [s["d_os"] / s["d_ol"] for s in seeds if s["d_ol"] > 0]
+        ratios = [s["r"] for s in seeds if s["r"] is not None]  # T1's r as scored (None: no large response)
         for variant, key, magnitude in VARIANTS:
             out.append({"instance_id": rec["instance_id"], "task": row["task"], "variant": variant,
                         "magnitude": round(float(row[magnitude]), 9), "simulator": float(row[key]),
