@@ -15,21 +15,28 @@ from pathlib import Path
 
 @functools.cache
 def cpu_model() -> str:
-    """This machine's CPU: `/proc/cpuinfo`'s model name, the architecture and the widest x86 vector extension
-    (a virtual machine's model name is often generic), e.g. `AMD EPYC 7B13 (x86_64, AVX2)`."""
-    name, flags = "", set()
+    """This machine's CPU: `/proc/cpuinfo`'s model name, the architecture with the x86 family and model (a virtual
+    machine's model name is often generic: "AMD EPYC" names several generations) and the widest x86 vector
+    extension, e.g. `AMD EPYC (x86_64 family 25 model 17, AVX-512)`."""
+    name, flags, ids = "", set(), {}
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             key, _, value = line.partition(":")
-            if key.strip() == "model name" and not name:
+            key = key.strip()
+            if key == "model name" and not name:
                 name = value.strip()
-            elif key.strip() == "flags" and not flags:
+            elif key == "flags" and not flags:
                 flags = set(value.split())
+            elif key in ("cpu family", "model") and key not in ids:
+                ids[key] = value.strip()
     except OSError:
         pass
     vector = next((label for flag, label in (("avx512f", "AVX-512"), ("avx2", "AVX2"), ("avx", "AVX"))
                    if flag in flags), "")
-    details = ", ".join(x for x in (platform.machine() or "unknown architecture", vector) if x)
+    arch = platform.machine() or "unknown architecture"
+    if "cpu family" in ids and "model" in ids:
+        arch += f" family {ids['cpu family']} model {ids['model']}"
+    details = ", ".join(x for x in (arch, vector) if x)
     return f"{name or platform.processor() or 'unknown CPU'} ({details})"
 
 
