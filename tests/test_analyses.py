@@ -294,6 +294,14 @@ def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp
     for k in kinds.values():
         assert k["generated_micro_mse"] == pytest.approx(k["reference_micro_mse"], rel=0.2)
     assert kinds["expert"]["reference_ratio_to_expert"] == 1.0
+    manifest = tmp_path / "oracle" / "submission.json"  # a submission made for T3 only: the rest is not read
+    manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "configs": ["t3_libero"]}))
+    assert main(["study", "idm", "--release", str(libero_release), "--checkpoint", str(tmp_path / "idm1.json"),
+                 "--submission", str(tmp_path / "oracle"), "--out", str(tmp_path / "t3only")]) == 0
+    t3only = json.loads((tmp_path / "t3only" / "idm.json").read_text())["platforms"]["libero"]["kinds"]
+    assert t3only["cross_task"]["generated_micro_mse"] is None and t3only["cross_task"]["generated_episodes"] == 0
+    assert t3only["policy_early"]["generated_micro_mse"] == kinds["policy_early"]["generated_micro_mse"]
+    assert 0 < t3only["expert"]["generated_episodes"] < t3only["expert"]["episodes"]
     for name in ("libero", "aloha", "maniskill"):  # the packaged checkpoints load and fit the limit
         path = idm.PACKAGED / f"idm_{name}.json"
         assert path.stat().st_size <= idm.MAX_CHECKPOINT_BYTES and idm.load(path)["platform"] == name

@@ -37,6 +37,13 @@ def reports(suites_release, tmp_path_factory):
     (root / "other").mkdir()
     (root / "other" / "report.json").write_text(json.dumps(other))
     out["other"] = root / "other"
+    fewer = json.loads((out["static"] / "report.json").read_text())  # the same release, one config not scored
+    fewer["submission"]["model"] = "static-without-t4"
+    del fewer["platforms"]["maniskill"]["suites"]["t4"], fewer["release"]["configs"]["t4_maniskill"]
+    fewer["instances"] = [r for r in fewer["instances"] if r["config"] != "t4_maniskill"]
+    (root / "fewer").mkdir()
+    (root / "fewer" / "report.json").write_text(json.dumps(fewer))
+    out["fewer"] = root / "fewer"
     return out
 
 
@@ -60,6 +67,15 @@ def test_ranks_ties_and_separate_tables(reports, tmp_path, capsys):
     assert "1=." in md and "release.json sha256" in md
     assert main_rows["baseline:oracle"]["cells"]["maniskill overall"]["partial"]  # no T1 in this release: marked *
     assert "100.0* [" in md
+
+
+def test_a_report_of_fewer_configs_of_the_same_release_is_ranked_beside_the_others(reports, tmp_path):
+    out = tmp_path / "lb"
+    assert main(["leaderboard", str(reports["oracle"]), str(reports["fewer"]), "--out", str(out)]) == 0
+    board = json.loads((out / "leaderboard.json").read_text())
+    assert board["not_comparable"] == [] and set(board["main"]["rows"]) == {"baseline:oracle", "static-without-t4"}
+    cells = board["main"]["rows"]["static-without-t4"]["cells"]
+    assert "maniskill t4" not in cells and cells["maniskill t2"]["rank"] == 2
 
 
 def test_refuses_bad_input(reports, tmp_path, capsys):
@@ -165,3 +181,13 @@ def test_ranking_consistency(tmp_path):
     few = json.loads((tmp_path / "few" / "leaderboard.json").read_text())["main"]["consistency"]
     assert "at least 4" in few["note"] and not few["pairs"][0]["suites"]["overall"]["meaningful"]
     assert "†" in (tmp_path / "few" / "leaderboard.md").read_text()
+
+    (tmp_path / "two").mkdir()  # a model of two platforms: in the table, its macro average marked partial
+    two = {p: {"overall": 50.0, "t2": 50.0} for p in ("libero", "maniskill")}
+    (tmp_path / "two" / "report.json").write_text(json.dumps(_synthetic("two-platforms", two)))
+    assert main(["leaderboard", *map(str, paths), str(tmp_path / "two"), "--out", str(tmp_path / "six")]) == 0
+    six = json.loads((tmp_path / "six" / "leaderboard.json").read_text())["main"]
+    assert six["rows"]["two-platforms"]["cells"]["macro overall"]["partial"]
+    assert not any(r["cells"]["macro overall"]["partial"] for m, r in six["rows"].items() if m != "two-platforms")
+    models = {tuple(p["platforms"]): p["suites"]["overall"]["models"] for p in six["consistency"]["pairs"]}
+    assert models == {("aloha", "libero"): 5, ("aloha", "maniskill"): 5, ("libero", "maniskill"): 6}

@@ -1,8 +1,10 @@
 """`wsp leaderboard`: models × (platform, suite, Overall) from any number of score reports (`wsp score`).
 
-Comparable reports only: the main table holds the reports made against the same release (`release.json`
-checksum and the fingerprints of the configs scored, `wsp_eval.integrity`), benchmark version and evaluators (backend names and versions) as the first one given; every other
-report goes to a table of its own, headed by what differs, never mixed in. Scores and 95 % CIs are the reports'
+Comparable reports only: the main table holds the reports made against the same release (`release.json` checksum,
+and the same fingerprint, `wsp_eval.integrity`, for every config both scored), benchmark version and evaluators
+(backend names and versions) as the first one given; every other report goes to a table of its own, headed by what
+differs, never mixed in. A report of some of the release's platforms (a model of one robot) has cells for those;
+its macro average, over fewer platforms than the table's, is marked partial. Scores and 95 % CIs are the reports'
 own. **Ties**: within each column the models are ranked by score, and a model whose difference to the one ranked
 just above it is not significant shares its rank ("=") — a paired bootstrap over the instances both reports
 scored (`BOOTSTRAP` resamples, seeded; T5 resampled within primitives as its score is), the difference's 95 %
@@ -29,6 +31,7 @@ import numpy as np
 from wsp_eval.release_format import split_config
 from wsp_eval.score import bootstrap_means
 from wsp_eval.studies.agreement import spearman
+from wsp_eval.studies.stats import interval_text
 from wsp_eval.suites import SCORERS
 
 BOOTSTRAP = 2000
@@ -55,8 +58,11 @@ class Entry:
     def key(self) -> tuple:
         rel = self.report.get("release", {})
         backends = tuple(sorted((r, b["name"], b["version"]) for r, b in self.report.get("backends", {}).items()))
-        content = tuple(sorted((c, v.get("fingerprint")) for c, v in rel.get("configs", {}).items()))
-        return (rel.get("release_json_sha256"), content), rel.get("version"), backends
+        return rel.get("release_json_sha256"), rel.get("version"), backends
+
+    @property
+    def fingerprints(self) -> dict[str, str | None]:
+        return {c: v.get("fingerprint") for c, v in self.report.get("release", {}).get("configs", {}).items()}
 
     def scores(self, config: str) -> dict[str, tuple[float, str]]:
         return {r["instance_id"]: (float(r["score"]), str(r.get("group", ""))) for r in self.report["instances"]
@@ -134,6 +140,7 @@ def tied(a: Entry, b: Entry, platform: str, suite: str) -> bool:
 def table(entries: list[Entry]) -> dict:
     """One comparable group: columns, and per model its cells (score, CI, rank, tied with the one above)."""
     cols = _columns(entries)
+    platforms = {p for p, _ in cols if p != "macro"}
     rows = {e.model: {"report": e.path, "cells": {}} for e in entries}
     for platform, suite in cols:
         have = [(e, c) for e in entries if (c := _cell(e, platform, suite)) and c.get("score") is not None]
@@ -142,9 +149,10 @@ def table(entries: list[Entry]) -> dict:
         for k, (e, c) in enumerate(have):
             tie = k > 0 and tied(have[k - 1][0], e, platform, suite)
             rank = rank if tie else k + 1
+            partial = (c.get("complete") is False if platform != "macro"
+                       else set(e.report["platforms"]) < platforms)
             rows[e.model]["cells"][f"{platform} {suite}"] = {"score": c["score"], "ci": c.get("ci"), "rank": rank,
-                                                             "tied_with_above": tie,
-                                                             "partial": c.get("complete") is False}
+                                                             "tied_with_above": tie, "partial": partial}
     first = entries[0].report
     t = {"columns": [f"{p} {s}" for p, s in cols], "rows": rows,
          "release": first.get("release", {}), "backends": first.get("backends", {}),
@@ -183,17 +191,22 @@ def build(paths: list[Path]) -> dict:
     dupes = sorted({m for m in models if models.count(m) > 1})
     if dupes:
         raise LeaderboardError(f"more than one report of model(s) {', '.join(dupes)}: give one report per model")
+    first = entries[0]
+
+    def same_files(e: Entry) -> bool:  # of the same release.json: the same content in every config both scored
+        a, b = e.fingerprints, first.fingerprints
+        return e.key[0] != first.key[0] or all(a[c] == b[c] for c in a.keys() & b.keys())
+
     groups: dict[tuple, list[Entry]] = {}
     for e in entries:
-        groups.setdefault(e.key, []).append(e)
-    main_key = entries[0].key
+        groups.setdefault((*e.key, same_files(e)), []).append(e)
+    main_key = (*first.key, True)
     apart = []
     for key, members in groups.items():
         if key == main_key:
             continue
-        why = [w for w, x, y in (("release" if key[0][0] != main_key[0][0] else "release files scored", key[0],
-                                  main_key[0]), ("benchmark version", key[1], main_key[1]),
-                                 ("evaluators", key[2], main_key[2])) if x != y]
+        why = [w for w, x, y in zip(("release", "benchmark version", "evaluators", "release files scored"), key,
+                                    main_key) if x != y]
         apart.append({"differs_in": why, **table(members)})
     return {"main": table(groups[main_key]), "not_comparable": apart}
 
@@ -201,9 +214,9 @@ def build(paths: list[Path]) -> dict:
 def _fmt(cell: dict | None) -> str:
     if not cell:
         return "—"
-    ci = f" [{cell['ci'][0]:.1f}, {cell['ci'][1]:.1f}]" if cell.get("ci") else ""
     partial = "*" if cell.get("partial") else ""
-    return f"{cell['rank']}{'=' if cell['tied_with_above'] else ''}. {cell['score']:.1f}{partial}{ci}"
+    tie = "=" if cell["tied_with_above"] else ""
+    return f"{cell['rank']}{tie}. {cell['score']:.1f}{partial}{interval_text(cell.get('ci'), '.1f')}"
 
 
 def _header(t: dict) -> list[str]:
@@ -257,8 +270,9 @@ def _rho(cell: dict | None) -> str:
 
 
 LEGEND = ("Cells: rank (\"=\": not significantly different from the model ranked just above, paired bootstrap), "
-          "score [95 % CI]; \"*\": a partial Overall (not all of T1–T5 scored). Ranking consistency: ρ (models "
-          "compared); \"†\": fewer than 4 models, not meaningful.")
+          "score [95 % CI]; \"*\": partial, an Overall without all of T1–T5 or a macro average without every "
+          "platform of the table. Ranking consistency: ρ (models compared); \"†\": fewer than 4 models, not "
+          "meaningful.")
 
 
 def markdown(board: dict) -> str:

@@ -11,7 +11,8 @@ is a small JSON (`MAX_CHECKPOINT_BYTES`).
 Evaluation: **Micro-MSE**, the mean over matched timesteps and action dimensions of (predicted − true action)², per
 stream kind, on the simulator references: `expert` (T3's expert group and T1's unperturbed originals),
 `policy_early` (T3's early checkpoint) and `cross_task` (T2's replays), with each kind's ratio to the expert's; with
-`--submission`, the same on the submission's generated videos (its first seed) of those episodes.
+`--submission`, the same on the submission's generated videos (its first seed) of those episodes, over the configs it
+was made for (its `submission.json`'s "configs", default all).
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ from wsp_eval.reference import episodes, reference_frames
 from wsp_eval.release_format import INSTANCES, format_problem, load_release, split_config
 from wsp_eval.studies import StudyError
 from wsp_eval.studies.analysis_inputs import pyplot, write_json
+from wsp_eval.submission import named_configs
 from wsp_eval.video import VideoError, read_video
 
 SIZE = 64
@@ -143,9 +145,11 @@ def first_seed(submission: Path) -> int:
 
 
 def evaluate(release: Path, checkpoint: dict, submission: Path | None = None) -> dict:
-    """Micro-MSE per kind on the references (and, with `submission`, on its generated videos), and the ratios."""
+    """Micro-MSE per kind on the references (and, with `submission`, on its generated videos of the configs it was
+    made for; None where it has none), and the ratios."""
     platform = checkpoint["platform"]
     seed = None if submission is None else first_seed(submission)
+    covered = set() if submission is None else set(named_configs(submission, release))
     result: dict = {"platform": platform, "kinds": {}}
     found = streams(release, platform)
     if not any(found.values()):
@@ -158,7 +162,7 @@ def evaluate(release: Path, checkpoint: dict, submission: Path | None = None) ->
             stream = cached.setdefault(config, actions(config_dir))[e["episode_index"]]
             x, y = pairs(reference_frames(config_dir, e["episode_index"]), stream)
             errors["reference"].append(((predict(checkpoint, x) - y) ** 2).ravel())
-            if submission is not None:
+            if config in covered:
                 path = Path(submission) / config / e["wsp.episode_id"] / f"seed{seed}.mp4"
                 if not path.is_file():
                     raise StudyError(f"{path}: missing (the IDM reads the submission's seed {seed} of every episode)")
@@ -170,6 +174,8 @@ def evaluate(release: Path, checkpoint: dict, submission: Path | None = None) ->
         result["kinds"][kind] = {"episodes": len(items), **{
             f"{side}_micro_mse": float(np.concatenate(v).mean()) if v else None for side, v in errors.items()
             if side == "reference" or submission is not None}}
+        if submission is not None:
+            result["kinds"][kind]["generated_episodes"] = len(errors["generated"])
     expert = result["kinds"]["expert"].get("reference_micro_mse")
     for kind, k in result["kinds"].items():
         k["reference_ratio_to_expert"] = (k["reference_micro_mse"] / expert if expert and k["reference_micro_mse"]
@@ -212,7 +218,7 @@ def figure(result: dict, path: Path) -> None:
         x = np.arange(len(KINDS))
         sides = ["reference"] + (["generated"] if result["submission"] else [])
         for k, side in enumerate(sides):
-            values = [kinds[kind].get(f"{side}_micro_mse") or 0.0 for kind in KINDS]
+            values = [np.nan if (v := kinds[kind].get(f"{side}_micro_mse")) is None else v for kind in KINDS]
             ax.bar(x + (k - (len(sides) - 1) / 2) * 0.38, values, 0.38,
                    label="simulator references" if side == "reference" else "generated videos")
         ax.set_xticks(x, KINDS)
@@ -231,6 +237,8 @@ def markdown(result: dict) -> str:
              "|---|---|---|---|---|---|"]
     for platform, p in sorted(result["platforms"].items()):
         for kind, k in p["kinds"].items():
+            some = k.get("generated_episodes", k["episodes"])
+            of = f" ({some} of {k['episodes']})" if 0 < some < k["episodes"] else ""
             lines.append(f"| {platform} | {kind} | {k['episodes']} | {f(k['reference_micro_mse'])} | "
-                         f"{f(k['reference_ratio_to_expert'])} | {f(k.get('generated_micro_mse'))} |")
+                         f"{f(k['reference_ratio_to_expert'])} | {f(k.get('generated_micro_mse'))}{of} |")
     return "\n".join(lines) + "\n"

@@ -18,7 +18,7 @@ import numpy as np
 from wsp_eval.release_format import load_release, split_config
 from wsp_eval.studies import StudyError
 from wsp_eval.studies.analysis_inputs import config_records, load_report, model, pyplot, write_json
-from wsp_eval.studies.stats import BOOTSTRAP, SEED
+from wsp_eval.studies.stats import BOOTSTRAP, SEED, interval_text
 from wsp_eval.suites import SCORERS
 
 OUTPUTS = ("ordering.json", "ordering.png")
@@ -128,9 +128,8 @@ def markdown(result: dict) -> str:
     for platform, p in sorted(result["platforms"].items()):
         for suite, s in [*sorted(p["suites"].items()), ("overall", p["overall"])]:
             tau = "—" if s["kendall_tau"] is None else f"{s['kendall_tau']:.2f}"
-            ci = f" [{s['kendall_tau_ci'][0]:.2f}, {s['kendall_tau_ci'][1]:.2f}]" if s["kendall_tau_ci"] else ""
             n = s.get("n", "")
             lines.append(f"| {platform} | {suite.upper() if suite != 'overall' else 'Overall'} | {n} | "
-                         f"{', '.join(f'{v:.1f}' for v in s['scores'])} | {tau}{ci} | "
+                         f"{', '.join(f'{v:.1f}' for v in s['scores'])} | {tau}{interval_text(s['kendall_tau_ci'])} | "
                          f"{'yes' if s['in_order'] else 'no'} |")
     return "\n".join(lines) + "\n"

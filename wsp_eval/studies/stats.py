@@ -25,6 +25,12 @@ def bootstrap_ci(statistic: Callable[[np.ndarray], float | None], n: int, *, res
     return [float(lo), float(hi)]
 
 
+def interval_text(ci: list[float] | None, fmt: str = ".2f") -> str:
+    """" [lo, hi]" of a 95 % interval in the format `fmt` (e.g. ".3f", "+.1f"), for a table cell after its value;
+    "" when the interval is undefined."""
+    return f" [{ci[0]:{fmt}}, {ci[1]:{fmt}}]" if ci else ""
+
+
 def mean_ci(values) -> dict:
     """Mean, 95 % bootstrap interval and n of `values`."""
     x = np.asarray(values, float)

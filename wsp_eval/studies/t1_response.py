@@ -25,7 +25,7 @@ import numpy as np
 
 from wsp_eval.studies import StudyError, suite_configs
 from wsp_eval.studies.analysis_inputs import instance_rows, load_reports, model, pyplot, records, write_json
-from wsp_eval.studies.stats import bootstrap_ci, mean_ci, slope
+from wsp_eval.studies.stats import bootstrap_ci, interval_text, mean_ci, slope
 
 OUTPUTS = ("t1_response.json", "t1_response.png")
 VARIANTS = (("small", "d_os", "magnitude_small"), ("large", "d_ol", "magnitude_large"))
@@ -173,10 +173,6 @@ def _yerr(stats: list[dict]) -> np.ndarray:
     return np.clip(np.array([lo, hi]), 0, None)
 
 
-def _ci(ci: list[float] | None) -> str:
-    return f" [{ci[0]:.2f}, {ci[1]:.2f}]" if ci else ""
-
-
 def _f(x: float | None) -> str:
     return "—" if x is None else f"{x:.2f}"
 
@@ -187,7 +183,7 @@ def markdown(result: dict) -> str:
     for config, models in sorted(result["configs"].items()):
         for name, a in models.items():
             k, s = a["pooled"]["compression"], a["pooled"]["sides"]
-            lines.append(f"| {config} | {name} | {_f(k['slope'])}{_ci(k['ci'])} | {s['under']:.0%} | "
+            lines.append(f"| {config} | {name} | {_f(k['slope'])}{interval_text(k['ci'])} | {s['under']:.0%} | "
                          f"{s['compressed']:.0%} | {s['no_response']:.0%} | {_f(s['median_ratio'])}"
-                         f"{_ci(s['median_ratio_ci'])} | {k['instances']} |")
+                         f"{interval_text(s['median_ratio_ci'])} | {k['instances']} |")
     return "\n".join(lines) + "\n"

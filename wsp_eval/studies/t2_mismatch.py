@@ -16,7 +16,7 @@ import numpy as np
 from wsp_eval.studies import StudyError
 from wsp_eval.studies.agreement import spearman
 from wsp_eval.studies.analysis_inputs import config_records, model, pyplot, write_json
-from wsp_eval.studies.stats import bootstrap_ci, mean_ci
+from wsp_eval.studies.stats import bootstrap_ci, interval_text, mean_ci
 from wsp_eval.suites import t2
 
 OUTPUTS = ("t2_mismatch.json", "t2_mismatch.png")
@@ -79,6 +79,5 @@ def markdown(result: dict) -> str:
     for config, entry in sorted(result["configs"].items()):
         for name, m in entry["models"].items():
             rho = "—" if m["spearman"] is None else f"{m['spearman']:.3f}"
-            ci = f" [{m['spearman_ci'][0]:.3f}, {m['spearman_ci'][1]:.3f}]" if m["spearman_ci"] else ""
-            lines.append(f"| {config} | {name} | {m['n']} | {rho}{ci} |")
+            lines.append(f"| {config} | {name} | {m['n']} | {rho}{interval_text(m['spearman_ci'], '.3f')} |")
     return "\n".join(lines) + "\n"

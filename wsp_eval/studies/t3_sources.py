@@ -14,7 +14,7 @@ import numpy as np
 
 from wsp_eval.studies import StudyError
 from wsp_eval.studies.analysis_inputs import config_records, model, pyplot, write_json
-from wsp_eval.studies.stats import grouped_bootstrap_ci, mean_ci
+from wsp_eval.studies.stats import grouped_bootstrap_ci, interval_text, mean_ci
 
 OUTPUTS = ("t3_sources.json", "t3_sources.png")
 GROUPS = ("expert", "H1", "H2", "H3", "H4", "H5", "policy_early", "policy_late")
@@ -95,7 +95,7 @@ def figure(result: dict, path: Path) -> None:
 def markdown(result: dict) -> str:
     def cell(x: dict, sign: str = "") -> str:
         v = "—" if x["value"] is None else f"{x['value']:{sign}.1f}"
-        return v + (f" [{x['ci'][0]:{sign}.1f}, {x['ci'][1]:{sign}.1f}]" if x["ci"] else "")
+        return v + interval_text(x["ci"], f"{sign}.1f")
 
     lines = ["| config | model | late − early [95 % CI] | operators' range [95 % CI] | operators' SD |",
              "|---|---|---|---|---|"]
