@@ -69,6 +69,23 @@ def test_ranks_ties_and_separate_tables(reports, tmp_path, capsys):
     assert "100.0* [" in md
 
 
+def test_reports_of_another_scoring_version_or_lossy_scoring_go_apart(reports, tmp_path):
+    from wsp_eval.score import ENCODING_OFF
+
+    paths = [reports["oracle"]]
+    for name, change in (("older", {"scoring_version": 1}), ("lossy", {"encoding_check": ENCODING_OFF})):
+        report = {**json.loads((reports["static"] / "report.json").read_text()), **change}
+        report["submission"]["model"] = name
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "report.json").write_text(json.dumps(report))
+        paths.append(tmp_path / name)
+    assert main(["leaderboard", *map(str, paths), "--out", str(tmp_path / "lb")]) == 0
+    board = json.loads((tmp_path / "lb" / "leaderboard.json").read_text())
+    assert list(board["main"]["rows"]) == ["baseline:oracle"]
+    assert sorted((t["differs_in"], list(t["rows"])) for t in board["not_comparable"]) == [
+        (["encoding check"], ["lossy"]), (["scoring version"], ["older"])]
+
+
 def test_a_report_of_fewer_configs_of_the_same_release_is_ranked_beside_the_others(reports, tmp_path):
     out = tmp_path / "lb"
     assert main(["leaderboard", str(reports["oracle"]), str(reports["fewer"]), "--out", str(out)]) == 0

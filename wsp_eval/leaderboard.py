@@ -1,14 +1,15 @@
 """`wsp leaderboard`: models × (platform, suite, Overall) from any number of score reports (`wsp score`).
 
 Comparable reports only: the main table holds the reports made against the same release (`release.json` checksum,
-and the same fingerprint, `wsp_eval.integrity`, for every config both scored), benchmark version and evaluators
-(backend names and versions) as the first one given; every other report goes to a table of its own, headed by what
-differs, never mixed in. A report of some of the release's platforms (a model of one robot) has cells for those;
-its macro average, over fewer platforms than the table's, is marked partial. Scores and 95 % CIs are the reports'
-own. **Ties**: within each column the models are ranked by score, and a model whose difference to the one ranked
-just above it is not significant shares its rank ("=") — a paired bootstrap over the instances both reports
-scored (`BOOTSTRAP` resamples, seeded; T5 resampled within primitives as its score is), the difference's 95 %
-interval containing 0. Overall and macro differences resample every suite at once, as their CIs do.
+and the same fingerprint, `wsp_eval.integrity`, for every config both scored), benchmark version, evaluators
+(backend names and versions), scoring version and encoding check (`--accept-lossy` or not) as the first one given;
+every other report goes to a table of its own, headed by what differs, never mixed in. A report of some of the
+release's platforms (a model of one robot) has cells for those; its macro average, over fewer platforms than the
+table's, is marked partial. Scores and 95 % CIs are the reports' own. **Ties**: within each column the models are
+ranked by score, and a model whose difference to the one ranked just above it is not significant shares its rank
+("=") — a paired bootstrap over the instances both reports scored (`BOOTSTRAP` resamples, seeded; T5 resampled
+within primitives as its score is), the difference's 95 % interval containing 0. Overall and macro differences
+resample every suite at once, as their CIs do.
 
 **Ranking consistency**: per pair of platforms, Spearman's ρ between the models' Overall scores on the two (the
 models scored on both; ρ of scores is ρ of their ranks), and per suite both platforms have; the mean over the
@@ -35,6 +36,8 @@ from wsp_eval.studies.stats import interval_text
 from wsp_eval.suites import SCORERS
 
 BOOTSTRAP = 2000
+DIFFERS = ("release", "benchmark version", "evaluators", "scoring version", "encoding check",  # `Entry.key`'s parts
+           "release files scored")
 SEED = 0
 MIN_MODELS = 4  # fewer models than this make a rank correlation meaningless
 
@@ -58,7 +61,8 @@ class Entry:
     def key(self) -> tuple:
         rel = self.report.get("release", {})
         backends = tuple(sorted((r, b["name"], b["version"]) for r, b in self.report.get("backends", {}).items()))
-        return rel.get("release_json_sha256"), rel.get("version"), backends
+        return (rel.get("release_json_sha256"), rel.get("version"), backends, self.report.get("scoring_version"),
+                self.report.get("encoding_check"))
 
     @property
     def fingerprints(self) -> dict[str, str | None]:
@@ -205,8 +209,7 @@ def build(paths: list[Path]) -> dict:
     for key, members in groups.items():
         if key == main_key:
             continue
-        why = [w for w, x, y in zip(("release", "benchmark version", "evaluators", "release files scored"), key,
-                                    main_key) if x != y]
+        why = [w for w, x, y in zip(DIFFERS, key, main_key) if x != y]
         apart.append({"differs_in": why, **table(members)})
     return {"main": table(groups[main_key]), "not_comparable": apart}
 
