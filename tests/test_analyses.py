@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import glob
 import json
+import shutil
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -296,6 +297,8 @@ def test_idm_trains_deterministically_and_reports_per_stream(libero_release, tmp
     assert kinds["expert"]["reference_ratio_to_expert"] == 1.0
     manifest = tmp_path / "oracle" / "submission.json"  # a submission made for T3 only: the rest is not read
     manifest.write_text(json.dumps({**json.loads(manifest.read_text()), "configs": ["t3_libero"]}))
+    for other in ("t1_libero", "t2_libero"):
+        shutil.rmtree(tmp_path / "oracle" / other)
     assert main(["study", "idm", "--release", str(libero_release), "--checkpoint", str(tmp_path / "idm1.json"),
                  "--submission", str(tmp_path / "oracle"), "--out", str(tmp_path / "t3only")]) == 0
     t3only = json.loads((tmp_path / "t3only" / "idm.json").read_text())["platforms"]["libero"]["kinds"]

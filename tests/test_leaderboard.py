@@ -93,6 +93,18 @@ def test_a_report_of_fewer_configs_of_the_same_release_is_ranked_beside_the_othe
     assert board["not_comparable"] == [] and set(board["main"]["rows"]) == {"baseline:oracle", "static-without-t4"}
     cells = board["main"]["rows"]["static-without-t4"]["cells"]
     assert "maniskill t4" not in cells and cells["maniskill t2"]["rank"] == 2
+    twin = json.loads((reports["oracle"] / "report.json").read_text())  # the oracle's scores, less T4
+    twin["submission"]["model"] = "oracle-without-t4"
+    del twin["platforms"]["maniskill"]["suites"]["t4"], twin["release"]["configs"]["t4_maniskill"]
+    twin["instances"] = [r for r in twin["instances"] if r["config"] != "t4_maniskill"]
+    (tmp_path / "twin").mkdir()
+    (tmp_path / "twin" / "report.json").write_text(json.dumps(twin))
+    assert main(["leaderboard", str(reports["oracle"]), str(tmp_path / "twin"), "--out", str(tmp_path / "lb2")]) == 0
+    rows = json.loads((tmp_path / "lb2" / "leaderboard.json").read_text())["main"]["rows"]
+    cells = rows["oracle-without-t4"]["cells"]
+    assert cells["maniskill t2"]["tied_with_above"]  # identical scores on a config both scored
+    # its Overall averages fewer suites than the oracle's, equal on every shared one: ranked by score, not tied
+    assert not cells["maniskill overall"]["tied_with_above"] and cells["maniskill overall"]["rank"] == 2
 
 
 def test_refuses_bad_input(reports, tmp_path, capsys):

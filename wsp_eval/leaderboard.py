@@ -9,7 +9,9 @@ table's, is marked partial. Scores and 95 % CIs are the reports' own. **Ties**: 
 ranked by score, and a model whose difference to the one ranked just above it is not significant shares its rank
 ("=") — a paired bootstrap over the instances both reports scored (`BOOTSTRAP` resamples, seeded; T5 resampled
 within primitives as its score is), the difference's 95 % interval containing 0. Overall and macro differences
-resample every suite at once, as their CIs do.
+resample every suite at once, as their CIs do. An Overall or macro average over other configs than the one ranked
+just above it is ranked by its score alone and never marked "=" (paired differences do not compare means over
+different configs).
 
 **Ranking consistency**: per pair of platforms, Spearman's ρ between the models' Overall scores on the two (the
 models scored on both; ρ of scores is ρ of their ranks), and per suite both platforms have; the mean over the
@@ -129,6 +131,9 @@ def tied(a: Entry, b: Entry, platform: str, suite: str) -> bool:
         diffs = _suite_diffs(a, b, config, rng)
     else:
         platforms = [platform] if platform != "macro" else sorted(a.report["platforms"])
+        if platform == "macro" and set(platforms) != set(b.report["platforms"]) or any(
+                set(_configs(a, p)) != set(_configs(b, p)) for p in platforms):
+            return False  # means over different configs: ranked by score alone, never marked "="
         per_platform = []
         for p in platforms:
             parts = [x for c in _configs(a, p) if (x := _suite_diffs(a, b, c, rng)) is not None]
@@ -196,10 +201,15 @@ def build(paths: list[Path]) -> dict:
     if dupes:
         raise LeaderboardError(f"more than one report of model(s) {', '.join(dupes)}: give one report per model")
     first = entries[0]
+    main_files: dict[str, str | None] = {}  # the fingerprint of every config the main table's reports scored
 
-    def same_files(e: Entry) -> bool:  # of the same release.json: the same content in every config both scored
-        a, b = e.fingerprints, first.fingerprints
-        return e.key[0] != first.key[0] or all(a[c] == b[c] for c in a.keys() & b.keys())
+    def same_files(e: Entry) -> bool:  # of the main table's release: the same content in every config scored
+        if e.key != first.key:
+            return True
+        if any(main_files[c] != f for c, f in e.fingerprints.items() if c in main_files):
+            return False
+        main_files.update(e.fingerprints)
+        return True
 
     groups: dict[tuple, list[Entry]] = {}
     for e in entries:
