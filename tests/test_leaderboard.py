@@ -9,6 +9,7 @@ another release goes to its own table. The HTML is sorted by clicking in real he
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -37,13 +38,18 @@ def reports(suites_release, tmp_path_factory):
     (root / "other").mkdir()
     (root / "other" / "report.json").write_text(json.dumps(other))
     out["other"] = root / "other"
-    fewer = json.loads((out["static"] / "report.json").read_text())  # the same release, one config not scored
-    fewer["submission"]["model"] = "static-without-t4"
-    del fewer["platforms"]["maniskill"]["suites"]["t4"], fewer["release"]["configs"]["t4_maniskill"]
-    fewer["instances"] = [r for r in fewer["instances"] if r["config"] != "t4_maniskill"]
-    (root / "fewer").mkdir()
-    (root / "fewer" / "report.json").write_text(json.dumps(fewer))
-    out["fewer"] = root / "fewer"
+    out["fewer"] = _without_t4(out["static"], "static-without-t4", root / "fewer")  # the same release, less T4
+    return out
+
+
+def _without_t4(report: Path, model: str, out: Path) -> Path:
+    """A copy of a real report under another model name, as if its submission had not been made for T4."""
+    r = json.loads((report / "report.json").read_text())
+    r["submission"]["model"] = model
+    del r["platforms"]["maniskill"]["suites"]["t4"], r["release"]["configs"]["t4_maniskill"]
+    r["instances"] = [x for x in r["instances"] if x["config"] != "t4_maniskill"]
+    out.mkdir()
+    (out / "report.json").write_text(json.dumps(r))
     return out
 
 
@@ -93,13 +99,8 @@ def test_a_report_of_fewer_configs_of_the_same_release_is_ranked_beside_the_othe
     assert board["not_comparable"] == [] and set(board["main"]["rows"]) == {"baseline:oracle", "static-without-t4"}
     cells = board["main"]["rows"]["static-without-t4"]["cells"]
     assert "maniskill t4" not in cells and cells["maniskill t2"]["rank"] == 2
-    twin = json.loads((reports["oracle"] / "report.json").read_text())  # the oracle's scores, less T4
-    twin["submission"]["model"] = "oracle-without-t4"
-    del twin["platforms"]["maniskill"]["suites"]["t4"], twin["release"]["configs"]["t4_maniskill"]
-    twin["instances"] = [r for r in twin["instances"] if r["config"] != "t4_maniskill"]
-    (tmp_path / "twin").mkdir()
-    (tmp_path / "twin" / "report.json").write_text(json.dumps(twin))
-    assert main(["leaderboard", str(reports["oracle"]), str(tmp_path / "twin"), "--out", str(tmp_path / "lb2")]) == 0
+    twin = _without_t4(reports["oracle"], "oracle-without-t4", tmp_path / "twin")  # the oracle's scores, less T4
+    assert main(["leaderboard", str(reports["oracle"]), str(twin), "--out", str(tmp_path / "lb2")]) == 0
     rows = json.loads((tmp_path / "lb2" / "leaderboard.json").read_text())["main"]["rows"]
     cells = rows["oracle-without-t4"]["cells"]
     assert cells["maniskill t2"]["tied_with_above"]  # identical scores on a config both scored

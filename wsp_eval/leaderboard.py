@@ -123,6 +123,11 @@ def _configs(entry: Entry, platform: str) -> list[str]:
     return [s["config"] for s in entry.report["platforms"].get(platform, {}).get("suites", {}).values()]
 
 
+def _scored(entry: Entry, platform: str) -> set[str]:
+    """The configs a report's Overall (of `platform`) or macro average (`platform` "macro") is the mean over."""
+    return {c for p in entry.report["platforms"] if platform in (p, "macro") for c in _configs(entry, p)}
+
+
 def tied(a: Entry, b: Entry, platform: str, suite: str) -> bool:
     """Whether a and b do not differ significantly in this column (paired bootstrap, module docstring)."""
     rng = np.random.default_rng(SEED)
@@ -131,8 +136,7 @@ def tied(a: Entry, b: Entry, platform: str, suite: str) -> bool:
         diffs = _suite_diffs(a, b, config, rng)
     else:
         platforms = [platform] if platform != "macro" else sorted(a.report["platforms"])
-        if platform == "macro" and set(platforms) != set(b.report["platforms"]) or any(
-                set(_configs(a, p)) != set(_configs(b, p)) for p in platforms):
+        if _scored(a, platform) != _scored(b, platform):
             return False  # means over different configs: ranked by score alone, never marked "="
         per_platform = []
         for p in platforms:
@@ -202,18 +206,12 @@ def build(paths: list[Path]) -> dict:
         raise LeaderboardError(f"more than one report of model(s) {', '.join(dupes)}: give one report per model")
     first = entries[0]
     main_files: dict[str, str | None] = {}  # the fingerprint of every config the main table's reports scored
-
-    def same_files(e: Entry) -> bool:  # of the main table's release: the same content in every config scored
-        if e.key != first.key:
-            return True
-        if any(main_files[c] != f for c, f in e.fingerprints.items() if c in main_files):
-            return False
-        main_files.update(e.fingerprints)
-        return True
-
     groups: dict[tuple, list[Entry]] = {}
-    for e in entries:
-        groups.setdefault((*e.key, same_files(e)), []).append(e)
+    for e in entries:  # a report of the main table's release must have its content in every config it scored
+        same_files = e.key != first.key or all(main_files.get(c, f) == f for c, f in e.fingerprints.items())
+        if same_files and e.key == first.key:
+            main_files.update(e.fingerprints)
+        groups.setdefault((*e.key, same_files), []).append(e)
     main_key = (*first.key, True)
     apart = []
     for key, members in groups.items():
