@@ -62,6 +62,7 @@ def test_an_excluded_pair_is_left_out_of_the_plan():
                                                             "dropped": {"primitive_not_observed": 8}}
     text = format_report(report)
     assert "pair survey: 2 of 16 pairs yield no proposal that passes the checks before rendering" in text
+    assert survey_report(entries)["screens"] == "pairs"
     assert "PushCube · push" in text and "left empty" in text
     assert "found no valid instance" not in text  # the empty slot is not reported as 8 failed attempts
 
@@ -99,3 +100,67 @@ def test_libero_survey_leaves_out_a_task_that_cannot_yield(tmp_path):
                                                      for a in range(len(soup["attempts"]))]
     assert excluded_pairs(entries) == {SlotPlan(COOKIE, "pull")}
     assert run_survey(T5Builder(cfg), tmp_path, lambda units: (_ for _ in ()).throw(AssertionError(units))) == entries
+
+
+def test_the_shared_expert_suites_report_their_source_survey(suites_release, t1_release):
+    """T1, T2 and T4 screen each task their slots draw (the source survey): on the tiny ManiSkill configs every task
+    passes at its first screened scene, nothing is left out and every slot is planned."""
+    for release, config in ((t1_release, "t1_maniskill"), (suites_release, "t2_maniskill"),
+                            (suites_release, "t4_maniskill")):
+        report = json.loads((release / config / "build_report.json").read_text())
+        cfg = BuildConfig.from_json(report["build_config"])
+        survey = report["survey"]
+        assert survey["screens"] == "tasks" and survey["excluded"] == [] and report["unplanned_slots"] == []
+        assert sorted(survey["pairs"]) == sorted({report_task for report_task in report["per_task"]}), config
+        assert all(p == {"screened": 1, "passed": True, "rendered": False, "dropped": {}}
+                   for p in survey["pairs"].values()), config
+        assert survey["simulator_steps"] > 0 and len(survey["pairs"]) <= len(set(cfg.tasks))
+
+
+def test_a_task_left_out_by_the_source_survey_gets_no_slot():
+    """A task none of whose sources passes is left out: T1's and the training split's slots go to the config's other
+    tasks in turn, T4's to the kind's other tasks; only the tasks some slot draws are screened."""
+    from wsp_data.builders.t1 import T1Builder
+    from wsp_data.builders.t4 import T4Builder
+    from wsp_data.builders.train import TrainBuilder
+    from wsp_data.platforms.contract import KINDS
+
+    tasks = ("PickCube", "PushCube", "StackCube")
+    assert [p.task for p in T1Builder(BuildConfig("t1", "maniskill", 2, tasks)).survey_pairs()] == list(tasks[:2])
+    for builder in (T1Builder(BuildConfig("t1", "maniskill", 6, tasks)),
+                    TrainBuilder(BuildConfig("train", "maniskill", 6, tasks))):
+        assert survey_units(builder) == [(i, t, None, False) for i, t in enumerate(tasks)]  # never rendered
+        builder.exclude(frozenset({SlotPlan("PushCube")}))
+        assert [builder.plan(k).task for k in range(6)] == ["PickCube", "StackCube"] * 3
+        builder.exclude(frozenset(SlotPlan(t) for t in tasks))
+        assert builder.plan(0) is None
+    t4 = T4Builder(BuildConfig("t4", "maniskill", 12, tasks))
+    before = [t4.plan(k) for k in range(12)]
+    assert [p.task for p in t4.survey_pairs()] == list(dict.fromkeys(p.task for p in before))
+    assert "PickCube" in {p.task for p in before}
+    t4.exclude(frozenset({SlotPlan("PickCube")}))
+    for k in range(12):  # each kind's slots go to its other tasks in turn; a kind left with none is unplanned
+        kind = KINDS[k % len(KINDS)]
+        others = [t for t in t4.kind_tasks[kind] if t != "PickCube"]
+        assert t4.plan(k) == (SlotPlan(others[(k // len(KINDS)) % len(others)], kind) if others else None)
+
+
+def test_libero_source_survey_leaves_out_a_task_whose_expert_breaks_a_joint_limit(tmp_path):
+    """LIBERO's bowl beside the cookie box: its expert drives the arm past a joint limit on every scene, so a
+    training split's survey leaves the task out and every slot goes to the can, which passes at once; the build
+    summary names the task and why. Real simulators, unrendered, one attempt per task (≈ 20 s)."""
+    from wsp_data.builders.train import TrainBuilder
+    from wsp_data.pair_survey import run_survey, screen_unit
+
+    cfg = BuildConfig("train", "libero", 4, (COOKIE, SOUP), max_attempts=1)
+    builder = TrainBuilder(cfg)
+    try:
+        entries = run_survey(builder, tmp_path, lambda units: ((u, screen_unit(builder, u)) for u in units))
+    finally:
+        builder.close()
+    assert [(e["task"], [a["outcome"] for a in e["attempts"]]) for e in entries] == [
+        (COOKIE, ["source_joint_limit"]), (SOUP, ["passed"])]
+    builder.exclude(excluded_pairs(entries))
+    assert [builder.plan(k).task for k in range(cfg.count)] == [SOUP] * 4
+    text = format_report(build_report(cfg, [], entries))
+    assert f"source survey: 1 of 2 tasks yield no valid expert source, left out: {COOKIE}" in text

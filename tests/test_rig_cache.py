@@ -1,7 +1,7 @@
 """The builders' rig cache (wsp_data.builders.rig.RigCache): bounded per platform (`rigs_per_worker`), least
 recently used closed first. The factory here is a plain recorder: the cache's own logic is under test (the
 simulator side — a build whose rigs are closed mid-way gives the same release — is the byte-identical LIBERO
-rebuild with `rigs_per_worker` = 1 in test_libero_release.py)."""
+rebuild with `rigs_per_worker` = 2 in test_libero_release.py)."""
 
 from __future__ import annotations
 
@@ -50,5 +50,23 @@ def test_capacity_must_hold_a_rig():
 
 
 def test_platform_bounds():
-    """LIBERO's rigs (1–2 GB each) are bounded; ManiSkill's are kept per task."""
-    assert kit("libero").rigs_per_worker == 2 and kit("maniskill").rigs_per_worker is None
+    """LIBERO's rigs (≈ 1.3 GB each) are bounded to one; ManiSkill's are kept per task."""
+    assert kit("libero").rigs_per_worker == 1 and kit("maniskill").rigs_per_worker is None
+
+
+def test_slots_go_to_workers_grouped_by_simulator():
+    """A build hands its slots out ordered by plan (task, then group), so consecutive slots share a rig; slots
+    the survey left without a plan come first (they are decided at once)."""
+    from wsp_data.build import by_simulator
+    from wsp_data.builders import BuildConfig, SlotPlan
+    from wsp_data.builders.t1 import T1Builder
+    from wsp_data.builders.t5 import T5Builder
+
+    t1 = T1Builder(BuildConfig("t1", "maniskill", 6, ("PushCube", "PickCube", "StackCube")))
+    assert by_simulator(t1, list(range(6))) == [1, 4, 0, 3, 2, 5]  # PickCube, PushCube, StackCube
+    assert by_simulator(t1, [5, 2, 3]) == [3, 2, 5]
+    t1.exclude(frozenset(SlotPlan(t) for t in ("PushCube", "PickCube", "StackCube")))
+    assert by_simulator(t1, [4, 1]) == [1, 4]
+    t5 = T5Builder(BuildConfig("t5", "maniskill", 16, ("PickCube", "PushCube")))
+    plans = [t5.plan(k) for k in by_simulator(t5, list(range(16)))]
+    assert plans == sorted(plans, key=lambda p: (p.task, p.group)) and len(set(plans)) > 2

@@ -169,6 +169,16 @@ def _worker_decide(task: tuple[int, frozenset[SlotPlan]]) -> SlotRecord:
     return decide_slot(builder, _WORKER["staging"], slot)
 
 
+def by_simulator(builder, slots: list[int]) -> list[int]:
+    """`slots` ordered by their plan (task, then group; the builder's exclusions applied), so that a worker's
+    consecutive slots mostly share its task simulators (`rigs_per_worker`); a slot's decision does not depend on
+    the order."""
+    def key(slot: int) -> tuple[str, str, int]:
+        plan = builder.plan(slot)
+        return ("", "", slot) if plan is None else (plan.task, plan.group or "", slot)
+    return sorted(slots, key=key)
+
+
 def survey(builder, staging: Staging, screen, progress: bool = False) -> frozenset[SlotPlan]:
     """The pairs the pair survey excludes (`wsp_data.pair_survey`), screening what is not staged yet by
     `screen`."""
@@ -192,16 +202,17 @@ def decide_slots(config: BuildConfig, staging: Staging, slots: list[int], worker
         try:
             builder.exclude(survey(builder, staging,
                                    lambda units: ((u, pair_survey.screen_unit(builder, u)) for u in units), progress))
-            for slot in slots:
+            for slot in by_simulator(builder, slots):
                 yield decide_slot(builder, staging, slot)
         finally:
             builder.close()
         return
     ctx = mp.get_context("spawn")
     with ctx.Pool(workers, initializer=_worker_init, initargs=(config.to_json(), str(staging.root))) as pool:
-        excluded = survey(builder_class(config.suite)(config), staging,
-                          lambda units: pool.imap_unordered(_worker_screen, units), progress)
-        yield from pool.imap_unordered(_worker_decide, [(slot, excluded) for slot in slots])
+        planner = builder_class(config.suite)(config)
+        excluded = survey(planner, staging, lambda units: pool.imap_unordered(_worker_screen, units), progress)
+        planner.exclude(excluded)
+        yield from pool.imap_unordered(_worker_decide, [(slot, excluded) for slot in by_simulator(planner, slots)])
 
 
 # -- report ---------------------------------------------------------------------------------------------
@@ -280,17 +291,21 @@ def format_report(report: dict, max_rows: int = 6) -> str:
         lines.append(f"  … {len(lossy) - max_rows} more task(s) with drops")
     if survey := report.get("survey"):
         excluded, n = survey["excluded"], len(survey["pairs"])
-        checks = ("every check, rendered" if all(p.get("rendered") for p in survey["pairs"].values())
-                  else "the checks before rendering")
-        lines.append(f"pair survey: {len(excluded)} of {n} pairs yield no proposal that passes {checks}, left out: "
-                     f"{', '.join(excluded[:6])}" + (f" … {len(excluded) - 6} more" if len(excluded) > 6 else "")
-                     if excluded else f"pair survey: each of {n} pairs yields a proposal that passes {checks}")
+        if survey.get("screens") == "tasks":
+            name, units, what = "source survey", "tasks", "valid expert source"
+        else:
+            checks = ("every check, rendered" if all(p.get("rendered") for p in survey["pairs"].values())
+                      else "the checks before rendering")
+            name, units, what = "pair survey", "pairs", f"proposal that passes {checks}"
+        lines.append(f"{name}: {len(excluded)} of {n} {units} yield no {what}, left out: {', '.join(excluded[:6])}"
+                     + (f" … {len(excluded) - 6} more" if len(excluded) > 6 else "")
+                     if excluded else f"{name}: each of {n} {units} yields a {what}")
     unplanned = set(report.get("unplanned_slots", []))
     if exhausted := [k for k in report["exhausted_slots"] if k not in unplanned]:
         lines.append(f"{len(exhausted)} slot(s) found no valid instance in "
                      f"{report['build_config']['max_attempts']} attempts: {exhausted[:10]}")
     if unplanned:
-        lines.append(f"{len(unplanned)} slot(s) left empty: the survey excluded every pair of their group: "
+        lines.append(f"{len(unplanned)} slot(s) left empty: the survey excluded everything they could draw: "
                      f"{sorted(unplanned)[:10]}")
     if warning := mixed_cpus_warning(report["config"], report.get("built_on", {})):
         lines.append(warning)

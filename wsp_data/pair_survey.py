@@ -1,5 +1,6 @@
-"""The pair survey: before any slot is decided, every (task, group) pair the config's slots draw from (T5: task and
-primitive; `SuiteBuilder.survey_pairs`) is screened on scenes of its own (`SuiteBuilder.screen`: the checks a
+"""The pair survey: before any slot is decided, every (task, group) pair the config's slots draw from
+(`SuiteBuilder.survey_pairs`: T5's task and primitive; the task alone for T1, T2, T4 and the training split,
+`wsp_data.builders.source_survey`) is screened on scenes of its own (`SuiteBuilder.screen`: the checks a
 proposal passes before it is rendered, and, in a config of at least `RENDERED_FROM` slots per pair, those on its
 rendered replay too), until one proposal passes or `max_attempts` are dropped. A pair
 none passes is excluded from the plan (`SuiteBuilder.exclude`): its slots go to the group's other pairs, and a slot
@@ -36,11 +37,12 @@ Unit = tuple[int, str, str, bool]  # (pair index, task, group, rendered)
 
 
 def survey_units(builder: SuiteBuilder) -> list[Unit]:
-    """The builder's survey pairs, each with its index and whether it is screened rendered: when the config has
-    at least `RENDERED_FROM` slots per pair, a screened proposal must also pass the checks made on its rendered
-    replay (`SuiteBuilder.screen(..., rendered=True)`), which costs about one instance per pair that yields."""
+    """The builder's survey pairs, each with its index and whether it is screened rendered: when the builder's
+    survey renders (`survey_renders`) and the config has at least `RENDERED_FROM` slots per pair, a screened
+    proposal must also pass the checks made on its rendered replay (`SuiteBuilder.screen(..., rendered=True)`),
+    which costs about one instance per pair that yields."""
     pairs = builder.survey_pairs()
-    rendered = builder.config.count >= RENDERED_FROM * len(pairs)
+    rendered = builder.survey_renders and builder.config.count >= RENDERED_FROM * len(pairs)
     return [(i, pair.task, pair.group, rendered) for i, pair in enumerate(pairs)]
 
 
@@ -103,15 +105,17 @@ def _passed(entry: dict) -> bool:
 
 
 def survey_report(entries: list[dict]) -> dict:
-    """The build report's `survey`: per pair (`task · group`) the proposals screened, whether one passed and the
-    drop reasons; the excluded pairs; the simulator steps (rendered or not) the survey cost."""
+    """The build report's `survey`: what it screens (`screens`: "pairs", or "tasks" for a source survey), per pair
+    (`task · group`, or the task) the proposals screened, whether one passed and the drop reasons; the excluded
+    pairs; the simulator steps (rendered or not) the survey cost."""
     pairs = {}
     for e in entries:
         dropped = Counter(a["outcome"] for a in e["attempts"] if a["outcome"] != "passed")
-        pairs[f"{e['task']} · {e['group']}"] = {"screened": len(e["attempts"]), "passed": _passed(e),
+        pairs[e["task"] if e["group"] is None else f"{e['task']} · {e['group']}"] = {"screened": len(e["attempts"]), "passed": _passed(e),
                                                "rendered": bool(e.get("rendered")),
                                                "dropped": dict(sorted(dropped.items()))}
-    return {"pairs": pairs, "excluded": [k for k, v in pairs.items() if not v["passed"]],
+    return {"screens": "tasks" if all(e["group"] is None for e in entries) else "pairs",
+            "pairs": pairs, "excluded": [k for k, v in pairs.items() if not v["passed"]],
             "simulator_steps": sum(a["simulated_steps"] for e in entries for a in e["attempts"])}
 
 

@@ -60,12 +60,15 @@ def run_slots(config: BuildConfig, staging: Staging, slots: list[int], workers: 
               address: str | None, progress: bool = False) -> Iterator[SlotRecord]:
     """Run the pair survey, then decide `slots`, as Ray tasks; yield each record once it is staged locally
     (completion order)."""
-    from wsp_data.build import survey
+    from wsp_data.build import by_simulator, survey
     from wsp_eval.ray_tasks import ray_imap
 
     cfg = config.to_json()
-    excluded = survey(builder_class(config.suite)(config), staging,
+    planner = builder_class(config.suite)(config)
+    excluded = survey(planner, staging,
                       lambda units: ray_imap(_screen, [(cfg, unit) for unit in units], workers, address), progress)
-    for record, rollouts in ray_imap(_decide, [(cfg, excluded, slot) for slot in slots], workers, address):
+    planner.exclude(excluded)
+    ordered = by_simulator(planner, slots)
+    for record, rollouts in ray_imap(_decide, [(cfg, excluded, slot) for slot in ordered], workers, address):
         staging.write_encoded(record, rollouts)
         yield record

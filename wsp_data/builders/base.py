@@ -143,7 +143,9 @@ class SuiteBuilder(ABC):
         `attempt(plan, seed, rng)`: propose, execute (unrendered first), validate, render what passed.
         `survey_pairs()`, `screen(plan, seed, rng)`: the (task, group) pairs the slots draw from and the checks
         a proposal for one passes before rendering, for the pair survey (`wsp_data.pair_survey`); default: no
-        survey. `exclude(pairs)`: the pairs the survey found no proposal for, left out of `plan`.
+        survey (`wsp_data.builders.source_survey.SourceSurvey`: one pair per task, its expert source checked).
+        `survey_renders`: whether a large config's survey also checks a proposal's rendered replay.
+        `exclude(pairs)`: the pairs the survey found no proposal for, left out of `plan`.
         `close()`: release simulator resources.
     """
 
@@ -151,6 +153,7 @@ class SuiteBuilder(ABC):
     title: ClassVar[str]
     description: ClassVar[str]
     roles: ClassVar[tuple[str, ...]]
+    survey_renders: ClassVar[bool] = True
 
     def __init__(self, config: BuildConfig):
         self.kit = kit(config.platform)

@@ -7,6 +7,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
+from wsp_data.machine import return_freed_memory
 from wsp_data.platforms.contract import TaskRig
 
 R = TypeVar("R")
@@ -34,6 +35,8 @@ class RigCache(Generic[R]):
         while self._capacity is not None and len(self._rigs) >= self._capacity:
             _, oldest = self._rigs.popitem(last=False)
             oldest.close()
+            del oldest
+            return_freed_memory()
         self._rigs[key] = rig = self._factory(*key)
         return rig
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
+from wsp_data.builders.source_survey import SourceSurvey
 from wsp_data.platforms.contract import Dropped, TaskRig
 from wsp_data.schema import FPS
 from wsp_data.staging import RolloutArrays
@@ -24,7 +25,7 @@ MAGNITUDES = (0.0025, 0.005, 0.010, 0.015, 0.020)
 WINDOW = 20  # steps (1 s at 20 Hz)
 
 
-class T1Builder(SuiteBuilder):
+class T1Builder(SourceSurvey, SuiteBuilder):
     suite = "t1"
     title = "T1 Local action calibration"
     description = ("Triplets (original, small, large): one non-gripper dimension of the native action perturbed in one "

@@ -18,6 +18,7 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
+from wsp_data.builders.source_survey import SourceSurvey
 from wsp_data.platforms import BLOCK_STEPS, PlatformKit, joint_blocked, kit  # noqa: F401  (BLOCK_STEPS: T2's rule, read by tests)
 from wsp_data.platforms.contract import Dropped, rollout_problem
 from wsp_data.platforms.validity import MAX_JOINT_SPEED, check_rollout
@@ -135,7 +136,7 @@ class _TaskRig:
                                  ro.actions)
 
 
-class T2Builder(SuiteBuilder):
+class T2Builder(SourceSurvey, SuiteBuilder):
     suite = "t2"
     title = "T2 Global trajectory coverage"
     description = ("Cross-task replays: the complete expert action stream of a donor task, executed from the receiver "
@@ -172,7 +173,7 @@ class T2Builder(SuiteBuilder):
         """The config's other tasks whose typical stream starts within START_GAP (every arm joint) of the
         receiver's: a donor from another start (e.g. the wrist turned by π/2) would jerk the arm in step one."""
         start = self.typical(receiver)[0]
-        return [t for t in dict.fromkeys(self.config.tasks)
+        return [t for t in self.usable(tuple(dict.fromkeys(self.config.tasks)))
                 if t != receiver and np.abs(self.typical(t)[0] - start).max() <= START_GAP]
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:

@@ -30,6 +30,7 @@ import numpy as np
 
 from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
+from wsp_data.builders.source_survey import SourceSurvey
 from wsp_data.platforms.contract import KINDS, Dropped, Proposal, T4Rig
 from wsp_data.platforms.interface import Rollout
 from wsp_data.schema import SOURCE_ROLE
@@ -80,7 +81,7 @@ def centre_hidden(objects: np.ndarray | None, k: int, pixel: np.ndarray) -> dict
     return {"object_pixels": int((objects == k + 1).sum()), "centre_gap": gap}
 
 
-class T4Builder(SuiteBuilder):
+class T4Builder(SourceSurvey, SuiteBuilder):
     suite = "t4"
     title = "T4 Interaction grounding"
     description = ("Validated no-contact rollouts, balanced over three kinds (`kind`): a distractor inserted where "
@@ -103,10 +104,10 @@ class T4Builder(SuiteBuilder):
                              f"needs {self.kit.t4_needs(missing)}")
         self.rig = RigCache(self.kit.t4_rig, self.kit.rigs_per_worker)
 
-    def plan(self, slot: int) -> SlotPlan:
+    def plan(self, slot: int) -> SlotPlan | None:
         kind = KINDS[slot % len(KINDS)]
-        tasks = self.kind_tasks[kind]
-        return SlotPlan(tasks[(slot // len(KINDS)) % len(tasks)], kind)
+        tasks = self.usable(self.kind_tasks[kind])
+        return SlotPlan(tasks[(slot // len(KINDS)) % len(tasks)], kind) if tasks else None
 
     def close(self) -> None:
         self.rig.close()

@@ -39,9 +39,9 @@ class LiberoKit(PlatformKit):
     gripper_dim = 6
     gripper_open = -1.0
     default_counts = {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000}  # paper Table S3 (spec §3)
-    rigs_per_worker = 2  # a LIBERO rig holds 1–2 GB (measured: +2.1 GB RSS for the first, +0.5–1.0 GB after
-    #   closing, for each further one) and takes 3 s to create against ≈ 45 s per T5 slot: one per task (40
-    #   tasks) would exhaust a machine's memory in a paper-size build
+    rigs_per_worker = 1  # a LIBERO rig (a state-only and a rendering simulator) holds ≈ 1.3 GB beside ≈ 1.1 GB
+    #   that the first leaves behind, and takes 2–5 s to create against 20–80 s per slot; a build orders its slots
+    #   by task (`wsp_data.build.by_simulator`), so one rig per worker is rarely re-created
 
     # -- core ---------------------------------------------------------------------------------------------
     def tasks(self) -> dict:
