@@ -26,7 +26,14 @@ frame nearest in time, spec §4.1):
      the angle of `ANGLES` at which the first used template, turned, best matches the frame at the object's
      position (measured alike on both videos, on frames smoothed only by `TURN_SMOOTH`, the reference's at the
      video's sharpness; angles modulo a quarter turn): it must turn as the reference's does and stay where the
-     reference's is.
+     reference's is;
+   - the place it left, wherever the object is: at every frame of the common duration (seen or not), the pixels of the object's
+     frame-0 image that the reference shows vacated (neither an object nor the robot: the table it revealed),
+     x_vac = √(Σ ‖G − R‖² / Σ ‖R₀ − R‖²) over those pixels, G the generated frame, R the reference's and R₀ its
+     frame 0, all smoothed by `VACATED_SMOOTH` (the reference's at the video's sharpness): 0 where the video
+     shows what the reference revealed, 1 where it still shows the object there. It needs no match, so it holds
+     where the object is hidden or only a sliver shows (a lifted object in the hand); it applies where the
+     reference vacates at least `MIN_PIXELS` (per 128² px) in some frame. x is the larger of it and the above.
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -36,7 +43,7 @@ frame nearest in time, spec §4.1):
    made while the object is hidden cannot be told from a jump. The T5 builder drops the others, as RMFA's suites
    drop a reference without a scorable window.
 
-The constants were chosen on training-range builds (ManiSkill and LIBERO, `--seed-range train`) against the
+The constants were chosen on training-range builds (ManiSkill, LIBERO and ALOHA, `--seed-range train`) against the
 generated-video negatives of `wsp study t5-negatives`; docs/validity.md reports them on sets built afterwards.
 """
 
@@ -57,6 +64,9 @@ LAG = 4  # frames (0.2 s at 20 Hz): the velocity error's step
 ANGLES = np.deg2rad(np.arange(-45.0, 45.1, 3.0))  # in-plane rotations tried (a box's image repeats every 90°)
 ROT_VISIBLE = 0.2  # rad: a reference whose object turns at least this far in the image is scored on rotation too
 TURN_SMOOTH = 1.0  # px per 128 px: the lighter smoothing the rotation is measured on (3 px leaves a blob)
+VACATED_SMOOTH = 1.0  # px per 128 px: the smoothing of the vacated-place comparison (both videos)
+VACATED_CROP = 16.0  # px per 128 px: the vacated-place comparison is smoothed on the object's frame-0 box grown by
+#   this much, which holds 3σ of the largest smoothing (√(VACATED_SMOOTH² + 4²) px)
 BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)  # px per 128: the sharpness levels a generated video is matched at
 SHARPNESS_MARGIN = 8.0  # px per 128: robot and object pixels grown by this are left out of the sharpness estimate
 X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise and a 1 px blur stay below it)
@@ -93,6 +103,9 @@ class ObjectTrack(NamedTuple):
     frames: np.ndarray  # (T, H, W, 3) uint8: the reference frames
     scene: np.ndarray  # (T, H, W) bool: the pixels of the sharpness estimate (neither robot nor object, grown)
     levels: dict  # blur level → its Level, filled on first use (`at_blur`)
+    vacated: np.ndarray | None  # (T, h, w) bool inside `vacated_box`: the object's frame-0 pixels the reference
+    #   shows vacated at each frame; None where it vacates fewer than MIN_PIXELS (per 128² px) in every frame
+    vacated_box: tuple[int, int, int, int]  # (x0, y0, x1, y1): the object's frame-0 box grown by VACATED_CROP
 
     @property
     def templates(self) -> list[Template | None]:
@@ -219,8 +232,54 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
     scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
                       for i in range(len(frames))])
+    vacated, box = _vacated(labels, label, robot, least)
     return ObjectTrack(frames.shape[1:3], search_region(templates, frames.shape[1:3]), points, true_turn, frames,
-                       scene, {0.0: _level(frames, templates, 0.0, turns=True)})
+                       scene, {0.0: _level(frames, templates, 0.0, turns=True)}, vacated, box)
+
+
+def _vacated(labels: np.ndarray, label: int, robot: np.ndarray,
+             least: float) -> tuple[np.ndarray | None, tuple[int, int, int, int]]:
+    """The object's frame-0 pixels that each reference frame shows vacated (no object, no robot there), cropped to
+    its frame-0 box grown by VACATED_CROP; None where no frame vacates `least` pixels."""
+    start = (labels[0] == label) & ~robot[0]
+    if not start.any():
+        return None, (0, 0, 0, 0)
+    h, w = labels.shape[1:]
+    grow = int(np.ceil(VACATED_CROP * h / 128))
+    ys, xs = np.nonzero(start)
+    x0, y0 = max(0, int(xs.min()) - grow), max(0, int(ys.min()) - grow)
+    x1, y1 = min(w, int(xs.max()) + 1 + grow), min(h, int(ys.max()) + 1 + grow)
+    crop = (slice(None), slice(y0, y1), slice(x0, x1))
+    vacated = start[y0:y1, x0:x1] & (labels[crop] == 0) & ~robot[crop]
+    if vacated.reshape(len(vacated), -1).sum(axis=1).max() < least:
+        return None, (x0, y0, x1, y1)
+    return vacated, (x0, y0, x1, y1)
+
+
+def vacated_error(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float) -> float:
+    """x_vac (module docstring, step 3): at the place the reference's object left, whether the generated video shows
+    what the reference revealed there (0) or the object still (1); 0 where the reference vacates too little.
+    `frame_idx[k]` is the generated frame shown at the time of the reference's frame k; `blur` the video's
+    sharpness level, at which the reference is drawn."""
+    if track.vacated is None:
+        return 0.0
+    x0, y0, x1, y1 = track.vacated_box
+    scale = track.size[0] / 128
+
+    def drawn(frame: np.ndarray, level: float) -> np.ndarray:
+        sigma = float(np.hypot(VACATED_SMOOTH, level)) * scale
+        return cv2.GaussianBlur(frame[y0:y1, x0:x1].astype(np.float32), (0, 0), sigma)
+
+    start = drawn(track.frames[0], blur)
+    error = own = 0.0
+    for k in range(min(len(frame_idx), len(track.frames))):
+        where = track.vacated[k]
+        if not where.any():
+            continue
+        ref = drawn(track.frames[k], blur)
+        error += float(np.sum((drawn(frames[frame_idx[k]], 0.0) - ref)[where] ** 2))
+        own += float(np.sum((start - ref)[where] ** 2))
+    return float(np.sqrt(error / own)) if own > 0 else 0.0
 
 
 def _level(frames: np.ndarray, templates: list[Template | None], blur: float, turns: bool) -> Level:
@@ -349,6 +408,7 @@ class Positions(NamedTuple):
     frames: list[int]
     scale: float  # frame height / 128
     blur: float  # the video's blur level (px per 128) the templates were drawn at
+    vacated: float  # x_vac: the error at the place the object left (`vacated_error`)
 
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
@@ -368,11 +428,16 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
         turn.append(orientation(smoothed(frame, TURN_SMOOTH), level.turns, centroid) if by_turn else 0.0)
     return Positions(np.array(found), track.points[used], np.array(turn),
                      quarter_turn(level.angles[: len(used)] - level.angles[0]) if by_turn else np.zeros(len(used)),
-                     used, track.size[0] / 128, blur)
+                     used, track.size[0] / 128, blur, vacated_error(frames, track, frame_idx, blur))
 
 
 def relative_error(p: Positions) -> float:
-    """x = max(x_d, x_v) of an object whose image travels; x_r of one that turns in place (module docstring, step 3)."""
+    """x (module docstring, step 3): the larger of x_vac and, for an object whose image travels, max(x_d, x_v), for
+    one that turns in place, its rotation and position error."""
+    return max(_motion_error(p), p.vacated)
+
+
+def _motion_error(p: Positions) -> float:
     turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
     if turned_by > 0:  # turning in place: it must turn as the reference's and stay where the reference's is
         x_r = float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2))) / turned_by

@@ -167,7 +167,7 @@ def score_clips(release: Path, config: str, backends, limit: int | None = None, 
             out.append({"config": config, "instance_id": row["instance_id"], "primitive": row["primitive"],
                         "variant": name, "score": round(float(score), 3),
                         "visible": name in POSITIVES or visibly_different(frames, clip.frames),
-                        **{k: detail[k] for k in ("object_fidelity", "object_error", "object_blur", "arm_rmfa",
+                        **{k: detail[k] for k in ("object_fidelity", "object_error", "object_blur", "object_vacated", "arm_rmfa",
                                                   "recognised", "label")}})
         if progress:
             progress()
