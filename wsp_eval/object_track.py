@@ -5,13 +5,16 @@ For one reference and a generated video over their common duration, at every ref
 frame nearest in time, spec §4.1):
 1. The reference's object at frame t: its exact visible pixels (the release's `object_mask` label of the evaluated
    object, less the robot's pixels) and their colours in the reference frame smoothed by `SMOOTH`: a masked
-   template. Where the object is, p*_t, is its simulator position projected through the release's camera (not the
+   template. The object's place is its simulator position projected through the release's camera (not the
    visible pixels' centroid, which a hand covering part of a resting object moves). A frame where fewer than
    `MIN_PIXELS` (per 128² px) of the object are visible carries no position and is skipped.
 2. The generated video's object at frame t: where that template best matches the generated frame (smoothed alike;
    masked sum of squared differences, sub-pixel by a parabola through the minimum and its neighbours) inside the
    search region, the box of the reference's templates grown by `MARGIN` template sizes; p̂_t is that match's
-   place of the projected position (the template's centroid moved by the reference's offset p*_t − centroid_t).
+   place of the projected position (the template's centroid moved by the reference's offset, projected position
+   less visible centroid). The reference's p*_t is read the same way: the template's match in the reference's own
+   frame drawn at the video's sharpness, moved by that offset, so the reference itself has error 0 exactly (the
+   sub-pixel vertex's bias, up to half a pixel on a sliver of an object, falls on both alike).
    A video without the object there matches it somewhere else in the region, or at the place it stayed. The
    templates are drawn at the generated video's own sharpness (`sharpness`: the level of `BLURS` at which the
    blurred reference best matches the video's scene away from the robot and the objects), so that a video drawn
@@ -23,10 +26,10 @@ frame nearest in time, spec §4.1):
      x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖ (a jump where the reference glides);
    - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE` in the image):
      x = max(x_r, RMS_t ‖p̂_t − p*_t‖ / MIN_TRAVEL) with x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is
-     the angle of `ANGLES` at which the first used template, turned, best matches the frame at the object's
-     position (measured alike on both videos, on frames smoothed only by `TURN_SMOOTH`, the reference's at the
-     video's sharpness; angles modulo a quarter turn): it must turn as the reference's does and stay where the
-     reference's is;
+     the angle of `ANGLES` at which the first used template, turned, best matches the frame at the matched centroid
+     (read alike on both videos, on frames smoothed only by `TURN_SMOOTH`, the reference's at the video's
+     sharpness; angles modulo a quarter turn; where the reference's reading never turns, against `ROT_VISIBLE`):
+     it must turn as the reference's does and stay where the reference's is;
    - the place it left, wherever the object is: at every frame of the common duration (seen or not), the pixels of the object's
      frame-0 image that the reference shows vacated (neither an object nor the robot: the table it revealed),
      x_vac = √(Σ ‖G − R‖² / Σ ‖R₀ − R‖²) over those pixels, G the generated frame, R the reference's and R₀ its
@@ -85,11 +88,16 @@ class Template(NamedTuple):
 
 class Level(NamedTuple):
     """The reference drawn at one blur level: a template per frame (None where too little of the object is
-    visible), the first used template turned by each of ANGLES, and the rotation θ*_t of every used frame."""
+    visible), the first used template turned by each of ANGLES, the rotation of every used frame at its visible
+    pixels' centroid (whether the reference turns, `ObjectTrack.turning`), and the reference read as a generated
+    video is read at this level: where each used frame's template matches that frame (`read`) and the rotation
+    measured there."""
 
     templates: list[Template | None]
     turns: list[Template]
     angles: np.ndarray
+    read: np.ndarray  # (N, 2): the used templates' centroids as matched in their own frames
+    read_turn: np.ndarray  # (N,): the rotation measured there (empty without turns)
 
 
 class ObjectTrack(NamedTuple):
@@ -233,8 +241,9 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
                       for i in range(len(frames))])
     vacated, box = _vacated(labels, label, robot, least)
-    return ObjectTrack(frames.shape[1:3], search_region(templates, frames.shape[1:3]), points, true_turn, frames,
-                       scene, {0.0: _level(frames, templates, 0.0, turns=True)}, vacated, box)
+    region = search_region(templates, frames.shape[1:3])
+    return ObjectTrack(frames.shape[1:3], region, points, true_turn, frames, scene,
+                       {0.0: _level(frames, templates, region, 0.0, turns=True)}, vacated, box)
 
 
 def _vacated(labels: np.ndarray, label: int, robot: np.ndarray,
@@ -282,31 +291,37 @@ def vacated_error(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray,
     return float(np.sqrt(error / own)) if own > 0 else 0.0
 
 
-def _level(frames: np.ndarray, templates: list[Template | None], blur: float, turns: bool) -> Level:
+def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int], blur: float,
+           turns: bool) -> Level:
     """`templates` (the reference's, at its own sharpness) redrawn from the frames blurred by `blur` (px per 128)
-    before the matching's smoothing and, with `turns`, the first one's turns and the reference's rotations."""
+    before the matching's smoothing, the reference read at that level and, with `turns`, the first template's turns
+    and the reference's rotations."""
+    sigma = float(np.hypot(SMOOTH, blur))
+    drawn = {k: smoothed(frames[k], sigma) for k, t in enumerate(templates) if t is not None}
     if blur > 0:
-        sigma = float(np.hypot(SMOOTH, blur))
         templates = [None if t is None else
-                     t._replace(pixels=smoothed(frame, sigma)[t.origin[1]:t.origin[1] + t.mask.shape[0],
-                                                             t.origin[0]:t.origin[0] + t.mask.shape[1]])
-                     for frame, t in zip(frames, templates)]
-    used = [k for k, t in enumerate(templates) if t is not None]
+                     t._replace(pixels=drawn[k][t.origin[1]:t.origin[1] + t.mask.shape[0],
+                                                t.origin[0]:t.origin[0] + t.mask.shape[1]])
+                     for k, t in enumerate(templates)]
+    used = list(drawn)
+    read = np.array([locate(drawn[k], templates[k], region) for k in used]).reshape(-1, 2)
     if not used or not turns:
-        return Level(templates, [], np.zeros(0))
+        return Level(templates, [], np.zeros(0), read, np.zeros(0))
     turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
     t0 = templates[used[0]]
     (x0, y0), (th, tw) = t0.origin, t0.mask.shape
     turns = turned(t0._replace(pixels=smoothed(frames[used[0]], turn_sigma)[y0:y0 + th, x0:x0 + tw]))
-    angles = np.array([orientation(smoothed(frames[k], turn_sigma), turns, templates[k].centre) for k in used])
-    return Level(templates, turns, angles)
+    at_turn = {k: smoothed(frames[k], turn_sigma) for k in used}
+    angles = np.array([orientation(at_turn[k], turns, templates[k].centre) for k in used])
+    read_turn = np.array([orientation(at_turn[k], turns, c) for k, c in zip(used, read)])
+    return Level(templates, turns, angles, read, read_turn)
 
 
 def at_blur(track: ObjectTrack, blur: float, turns: bool) -> Level:
     """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), with `turns` its turns and
     rotations too (level 0 always has them)."""
     if blur not in track.levels or (turns and not track.levels[blur].turns):
-        track.levels[blur] = _level(track.frames, track.templates, blur, turns)
+        track.levels[blur] = _level(track.frames, track.templates, track.region, blur, turns)
     return track.levels[blur]
 
 
@@ -409,6 +424,7 @@ class Positions(NamedTuple):
     scale: float  # frame height / 128
     blur: float  # the video's blur level (px per 128) the templates were drawn at
     vacated: float  # x_vac: the error at the place the object left (`vacated_error`)
+    by_turn: bool  # whether the object turns in place (scored by its rotation) rather than travels
 
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
@@ -424,11 +440,13 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
     for k in used:
         frame, t = frames[frame_idx[k]], level.templates[k]
         centroid = locate(smoothed(frame), t, track.region)
-        found.append(centroid + (track.points[k] - t.centre))
+        found.append(centroid)
         turn.append(orientation(smoothed(frame, TURN_SMOOTH), level.turns, centroid) if by_turn else 0.0)
-    return Positions(np.array(found), track.points[used], np.array(turn),
-                     quarter_turn(level.angles[: len(used)] - level.angles[0]) if by_turn else np.zeros(len(used)),
-                     used, track.size[0] / 128, blur, vacated_error(frames, track, frame_idx, blur))
+    offset = track.points[used] - np.array([level.templates[k].centre for k in used])  # to the projected position
+    return Positions(np.array(found) + offset, level.read[: len(used)] + offset, np.array(turn),
+                     quarter_turn(level.read_turn[: len(used)] - level.read_turn[0]) if by_turn
+                     else np.zeros(len(used)),
+                     used, track.size[0] / 128, blur, vacated_error(frames, track, frame_idx, blur), by_turn)
 
 
 def relative_error(p: Positions) -> float:
@@ -438,9 +456,10 @@ def relative_error(p: Positions) -> float:
 
 
 def _motion_error(p: Positions) -> float:
-    turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
-    if turned_by > 0:  # turning in place: it must turn as the reference's and stay where the reference's is
-        x_r = float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2))) / turned_by
+    if p.by_turn:  # turning in place: it must turn as the reference's and stay where the reference's is
+        wrong = float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2)))
+        turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
+        x_r = wrong / (turned_by if turned_by > 0 else ROT_VISIBLE)  # as the position, against the least visible
         return max(x_r, _rms(p.found - p.reference) / (MIN_TRAVEL * p.scale))
     moved = p.reference - p.reference[0]
     motion = float(np.sqrt(np.mean(np.sum(moved ** 2, axis=1))))

@@ -15,8 +15,9 @@ Positive controls: `oracle` (the reference), `blur_1px` (a 1 px Gaussian per 128
 (the calibration baseline's transform), `lossless` (the reference through the contract's lossless encoding and back);
 reported beside them, `blur` (the calibration baseline's 2 px blur, which smears ManiSkill's 5 px cubes into the
 gripper) and `arm_blur` (only the arm smeared, over a margin that reaches a grasped object).
-A negative counts only where it is visibly different from its reference (`judge_data.visibly_different`: a clip
-no one could tell from the reference by eye is no negative); the report says how many were not.
+A negative counts only where its object is visibly different from the reference's (`judge_data.visibly_different`:
+a clip no one could tell from the reference by eye is no negative); an arm-blurred negative counts where the same
+negative unblurred does, since the blurred arm alone would make every clip differ. The report says how many did not.
 
 Every clip is scored exactly as a submission's (`wsp_eval.suites.t5.score_seed`): the T5 score, its object-response
 fidelity, the arm's RMFA, and the paper-protocol label judge ("primitive recognised"). Reported per platform and
@@ -161,12 +162,15 @@ def score_clips(release: Path, config: str, backends, limit: int | None = None, 
     for row in rows:
         ref = InstanceReference(release / config, row)
         clip, prepared = Clip(ref), t5.prepare(ref, backends)
+        visible: dict[str, bool] = {}
         for name in variant_names():
+            base, _, blurred = name.partition("+")
             frames = variant_frames(clip, name)
+            visible[name] = visible[base] if blurred else (name in POSITIVES or visibly_different(frames, clip.frames))
             score, detail = t5.score_seed(prepared, {"reference": (frames, clip.fps)}, backends)
             out.append({"config": config, "instance_id": row["instance_id"], "primitive": row["primitive"],
                         "variant": name, "score": round(float(score), 3),
-                        "visible": name in POSITIVES or visibly_different(frames, clip.frames),
+                        "visible": visible[name],
                         **{k: detail[k] for k in ("object_fidelity", "object_error", "object_blur", "object_vacated", "arm_rmfa",
                                                   "recognised", "label")}})
         if progress:
