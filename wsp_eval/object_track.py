@@ -90,14 +90,14 @@ class Level(NamedTuple):
     """The reference drawn at one blur level: a template per frame (None where too little of the object is
     visible), the first used template turned by each of ANGLES, the rotation of every used frame at its visible
     pixels' centroid (whether the reference turns, `ObjectTrack.turning`), and the reference read as a generated
-    video is read at this level: where each used frame's template matches that frame (`read`) and the rotation
-    measured there."""
+    video is read at this level: where each used frame's template matches that frame (`read`) and, once a video is
+    scored by its turn (`at_blur`), the rotation measured there."""
 
     templates: list[Template | None]
     turns: list[Template]
     angles: np.ndarray
     read: np.ndarray  # (N, 2): the used templates' centroids as matched in their own frames
-    read_turn: np.ndarray  # (N,): the rotation measured there (empty without turns)
+    read_turn: np.ndarray | None  # (N,): the rotation measured there; None until a video scored by its turn needs it
 
 
 class ObjectTrack(NamedTuple):
@@ -306,23 +306,27 @@ def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[i
     used = list(drawn)
     read = np.array([locate(drawn[k], templates[k], region) for k in used]).reshape(-1, 2)
     if not used or not turns:
-        return Level(templates, [], np.zeros(0), read, np.zeros(0))
+        return Level(templates, [], np.zeros(0), read, None)
     turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
     t0 = templates[used[0]]
     (x0, y0), (th, tw) = t0.origin, t0.mask.shape
     turns = turned(t0._replace(pixels=smoothed(frames[used[0]], turn_sigma)[y0:y0 + th, x0:x0 + tw]))
-    at_turn = {k: smoothed(frames[k], turn_sigma) for k in used}
-    angles = np.array([orientation(at_turn[k], turns, templates[k].centre) for k in used])
-    read_turn = np.array([orientation(at_turn[k], turns, c) for k, c in zip(used, read)])
-    return Level(templates, turns, angles, read, read_turn)
+    angles = np.array([orientation(smoothed(frames[k], turn_sigma), turns, templates[k].centre) for k in used])
+    return Level(templates, turns, angles, read, None)
 
 
 def at_blur(track: ObjectTrack, blur: float, turns: bool) -> Level:
     """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), with `turns` its turns and
-    rotations too (level 0 always has them)."""
-    if blur not in track.levels or (turns and not track.levels[blur].turns):
-        track.levels[blur] = _level(track.frames, track.templates, track.region, blur, turns)
-    return track.levels[blur]
+    rotations and the reference's rotation read at its matched centroids too (level 0 always has the first two)."""
+    level = track.levels.get(blur)
+    if level is None or (turns and not level.turns):
+        level = _level(track.frames, track.templates, track.region, blur, turns)
+    if turns and level.read_turn is None:
+        turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
+        level = level._replace(read_turn=np.array([orientation(smoothed(track.frames[k], turn_sigma), level.turns, c)
+                                                   for k, c in zip(track.used, level.read)]))
+    track.levels[blur] = level
+    return level
 
 
 def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
