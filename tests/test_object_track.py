@@ -14,6 +14,7 @@ import shutil
 import subprocess
 import sys
 
+import cv2
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
@@ -22,8 +23,8 @@ from wsp_eval import backends as registry
 from wsp_eval.backends import BackendSpec
 from wsp_eval.baselines import blur
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, fidelity, object_track, positions, relative_error,
-                                   vacated_error)
+from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_error, fidelity, object_track, positions,
+                                   relative_error)
 from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
 from wsp_eval.score import ScoreError, score_submission
 from wsp_eval.studies import t5_negatives
@@ -91,13 +92,11 @@ def test_the_reference_scores_100_and_a_static_video_0(releases, platform, backe
 
 @pytest.mark.parametrize("platform", PLATFORMS)
 def test_an_object_frozen_or_erased_while_the_arm_acts_scores_low(releases, platform, backends):
-    """The arm is the reference's pixel for pixel (its RMFA stays high), yet the object does not respond. A frozen
-    object can still be credited on an in-place rotate whose turn the gripper covers (docs/validity.md, T5), so
-    there only the erased object is required to score low."""
+    """The arm is the reference's pixel for pixel (its RMFA stays high), yet the object does not respond: every
+    primitive, an in-place turn too (scored on the object's own pixels), scores low."""
     for ref in _references(releases(platform), platform):
         clip, prepared = t5_negatives.Clip(ref), t5.prepare(ref, backends)
-        frozen_owed = ref.row["primitive"] != "rotate"
-        for name in ("frozen", "erased") if frozen_owed else ("erased",):
+        for name in ("frozen", "erased"):
             frames = t5_negatives.variant_frames(clip, name)
             if not visibly_different(frames, clip.frames):
                 continue  # no one could tell it from the reference: no negative
@@ -225,11 +224,56 @@ def test_an_object_still_where_it_started_loses_at_the_place_it_left():
         for t in range(n):
             keep = start & (robot[t] == 0)
             still[t][keep] = frames[0][keep]
-        assert vacated_error(frames, track, idx, 0.0) == 0.0
-        assert vacated_error(still, track, idx, 0.0) == pytest.approx(1.0, abs=0.1), hidden
+        assert appearance_error(frames, track, track.vacated, idx, 0.0) == 0.0
+        assert appearance_error(still, track, track.vacated, idx, 0.0) == pytest.approx(1.0, abs=0.1), hidden
     frames, labels, robot, centres = _square_clip([10.0] * n, set())
     track = object_track(frames, labels, 1, robot, _pose(centres))
-    assert track.vacated is None and vacated_error(np.zeros_like(frames), track, idx, 0.0) == 0.0
+    assert track.vacated is None and appearance_error(np.zeros_like(frames), track, track.vacated, idx, 0.0) == 0.0
+
+
+def _turning_clip(angles_deg: np.ndarray, covered: bool = False, size: int = 64):
+    """A textured 12×12 square turning in place about (32, 32) by `angles_deg[t]`; with `covered`, a robot block over
+    it and a margin in every frame. Returns frames, object labels, robot labels and the pose."""
+    rng = np.random.default_rng(2)
+    patch = np.zeros((size, size, 3), np.uint8)
+    patch[26:38, 26:38] = rng.integers(0, 255, (12, 12, 3), dtype=np.uint8)
+    square = np.zeros((size, size), np.uint8)
+    square[26:38, 26:38] = 1
+    n = len(angles_deg)
+    frames = np.full((n, size, size, 3), 120, np.uint8)
+    labels = np.zeros((n, size, size), np.uint8)
+    robot = np.zeros((n, size, size), np.uint8)
+    for t, a in enumerate(angles_deg):
+        m = cv2.getRotationMatrix2D((31.5, 31.5), float(a), 1.0)
+        mask = cv2.warpAffine(square, m, (size, size), flags=cv2.INTER_NEAREST) > 0
+        frames[t][mask] = cv2.warpAffine(patch, m, (size, size), flags=cv2.INTER_NEAREST)[mask]
+        labels[t][mask] = 1
+        if covered:
+            frames[t, 20:44, 20:44] = 40
+            robot[t, 20:44, 20:44] = 1
+    half = np.deg2rad(np.asarray(angles_deg, float)) / 2  # a turn about the camera's (z) axis, quaternion wxyz
+    poses = np.c_[np.full(n, 31.5), np.full(n, 31.5), np.ones(n), np.cos(half), np.zeros((n, 2)), np.sin(half)]
+    return frames, labels, robot, ObjectPose(poses, np.eye(3), np.c_[np.eye(3), np.zeros(3)])
+
+
+def test_an_object_turning_in_place_is_scored_on_its_own_pixels():
+    """A square turning 40° in place (no travel): scored by x_turn, the appearance error on its pixels at frame 0 and
+    at t. The reference itself has x 0 exactly; a video whose square stays as at frame 0 (the arm's frames
+    otherwise) shows frame 0's image where the reference's turned, x_turn = 1 exactly; one whose square vanishes
+    shows the table there, more than 1. The same turn made wholly under the hand is not scorable."""
+    n = 24
+    frames, labels, robot, pose = _turning_clip(np.r_[np.zeros(6), np.linspace(0, 40, n - 6)])
+    track = object_track(frames, labels, 1, robot, pose)
+    assert not track.moving and track.turning and track.scorable
+    idx = np.arange(n)
+    exact = positions(frames, track, idx)
+    assert exact.by_turn and relative_error(exact) == 0.0
+    still = np.repeat(frames[:1], n, 0)
+    assert relative_error(positions(still, track, idx)) == pytest.approx(1.0, abs=1e-6)
+    gone = np.full_like(frames, 120)
+    assert relative_error(positions(gone, track, idx)) > 1.0
+    hidden = _turning_clip(np.linspace(0, 40, n), covered=True)
+    assert not object_track(hidden[0], hidden[1], 1, hidden[2], hidden[3]).scorable
 
 
 def test_an_older_release_format_is_refused_with_the_command_that_rebuilds_it(suites_release, tmp_path):

@@ -24,27 +24,30 @@ frame nearest in time, spec §4.1):
      displacement error x_d = RMS_t ‖(p̂_t − p̂_0) − (p*_t − p*_0)‖ / RMS_t ‖p*_t − p*_0‖ (a constant offset of the
      match, as blur gives, cancels) and the velocity error over `LAG` frames
      x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖ (a jump where the reference glides);
-   - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE` in the image):
-     x = max(x_r, RMS_t ‖p̂_t − p*_t‖ / MIN_TRAVEL) with x_r = RMS_t |(θ̂_t − θ̂_0) − θ*_t| / RMS_t |θ*_t|, where θ is
-     the angle of `ANGLES` at which the first used template, turned, best matches the frame at the matched centroid
-     (read alike on both videos, on frames smoothed only by `TURN_SMOOTH`, the reference's at the video's
-     sharpness; angles modulo a quarter turn; where the reference's reading never turns, against `ROT_VISIBLE`):
-     it must turn as the reference's does and stay where the reference's is;
-   - the place it left, wherever the object is: at every frame of the common duration (seen or not), the pixels of the object's
-     frame-0 image that the reference shows vacated (neither an object nor the robot: the table it revealed),
-     x_vac = √(Σ ‖G − R‖² / Σ ‖R₀ − R‖²) over those pixels, G the generated frame, R the reference's and R₀ its
-     frame 0, all smoothed by `VACATED_SMOOTH` (the reference's at the video's sharpness): 0 where the video
-     shows what the reference revealed, 1 where it still shows the object there. It needs no match, so it holds
-     where the object is hidden or only a sliver shows (a lifted object in the hand); it applies where the
-     reference vacates at least `MIN_PIXELS` (per 128² px) in some frame. x is the larger of it and the above.
+   - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE`): x_turn, the
+     appearance error below over the object's own pixels: at every frame t of the common duration, its pixels at
+     frame 0 and at frame t that are in sight at both (no robot at either). It needs no match or angle: a still
+     object shows frame 0's image where the reference shows it turned (x_turn = 1), one that vanishes shows the
+     table there (above 1), one that turns as the reference's shows what it shows (0);
+   - the place it left, wherever the object is: at every frame of the common duration (seen or not), the pixels of
+     the object's frame-0 image that the reference shows vacated (neither an object nor the robot: the table it
+     revealed), x_vac, the appearance error over those pixels: 0 where the video shows what the reference revealed,
+     1 where it still shows the object there. It needs no match, so it holds where the object is hidden or only a
+     sliver shows (a lifted object in the hand); it applies where the reference vacates at least `MIN_PIXELS` (per
+     128² px) in some frame. x is the larger of it and the above.
+   The appearance error over pixels P_t is √(Σ_t Σ_{P_t} ‖G − R‖² / Σ_t Σ_{P_t} ‖S − R‖²), G the generated frame,
+   R the reference's and S its frame 0 with frame t's robot on top (what an object that never moved would give),
+   all smoothed by `VACATED_SMOOTH` (the reference's at the video's sharpness).
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
 4. A reference is scorable when its object travels or turns so where it can be seen (`ObjectTrack.scorable`): it
    travels at least `MIN_TRAVEL` between frames that carry a position, and at least `SEEN_MOTION` of its image
-   path (the projected position's, over every frame) lies between consecutive frames that both carry one; motion
-   made while the object is hidden cannot be told from a jump. The T5 builder drops the others, as RMFA's suites
-   drop a reference without a scorable window.
+   path (the projected position's, over every frame) lies between consecutive frames that both carry one (motion
+   made while the object is hidden cannot be told from a jump); or it turns at least `ROT_VISIBLE` about the
+   camera's axis and the pixels it covers in sight (at frame 0 and not at t, or the reverse) number at least
+   `MIN_PIXELS` (per 128² px) at some frame t (a turn made under the hand cannot be seen). The T5 builder drops the
+   others, as RMFA's suites drop a reference without a scorable window.
 
 The constants were chosen on training-range builds (ManiSkill, LIBERO and ALOHA, `--seed-range train`) against the
 generated-video negatives of `wsp study t5-negatives`; docs/validity.md reports them on sets built afterwards.
@@ -64,12 +67,10 @@ MARGIN = 2.0  # the search region: the reference templates' box grown by this ma
 MIN_TRAVEL = 2.0  # px per 128 px of frame height: the reference object's image must move this far to be scorable
 SEEN_MOTION = 0.5  # share of the object's image path that must lie between frames in which it is seen
 LAG = 4  # frames (0.2 s at 20 Hz): the velocity error's step
-ANGLES = np.deg2rad(np.arange(-45.0, 45.1, 3.0))  # in-plane rotations tried (a box's image repeats every 90°)
-ROT_VISIBLE = 0.2  # rad: a reference whose object turns at least this far in the image is scored on rotation too
-TURN_SMOOTH = 1.0  # px per 128 px: the lighter smoothing the rotation is measured on (3 px leaves a blob)
-VACATED_SMOOTH = 1.0  # px per 128 px: the smoothing of the vacated-place comparison (both videos)
-VACATED_CROP = 16.0  # px per 128 px: the vacated-place comparison is smoothed on the object's frame-0 box grown by
-#   this much, which holds 3σ of the largest smoothing (√(VACATED_SMOOTH² + 4²) px)
+ROT_VISIBLE = 0.2  # rad: an object that turns at least this far about the camera's axis can be scored by its turn
+VACATED_SMOOTH = 1.0  # px per 128 px: the smoothing of the appearance comparisons (both videos)
+VACATED_CROP = 16.0  # px per 128 px: the appearance comparisons are smoothed on the object's box grown by this
+#   much, which holds 3σ of the largest smoothing (√(VACATED_SMOOTH² + 4²) px)
 BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)  # px per 128: the sharpness levels a generated video is matched at
 SHARPNESS_MARGIN = 8.0  # px per 128: robot and object pixels grown by this are left out of the sharpness estimate
 X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise and a 1 px blur stay below it)
@@ -88,21 +89,25 @@ class Template(NamedTuple):
 
 class Level(NamedTuple):
     """The reference drawn at one blur level: a template per frame (None where too little of the object is
-    visible), the first used template turned by each of ANGLES, the rotation of every used frame at its visible
-    pixels' centroid (whether the reference turns, `ObjectTrack.turning`), and the reference read as a generated
-    video is read at this level: where each used frame's template matches that frame (`read`) and, once a video is
-    scored by its turn (`at_blur`), the rotation measured there."""
+    visible), and the reference read as a generated video is read at this level: where each used frame's template
+    matches that frame (`read`)."""
 
     templates: list[Template | None]
-    turns: list[Template]
-    angles: np.ndarray
     read: np.ndarray  # (N, 2): the used templates' centroids as matched in their own frames
-    read_turn: np.ndarray | None  # (N,): the rotation measured there; None until a video scored by its turn needs it
+
+
+class Area(NamedTuple):
+    """Pixels an appearance comparison covers: `where` (T, h, w) bool inside `box` (x0, y0, x1, y1) of the frame,
+    and the robot's pixels there (T, h, w) bool."""
+
+    where: np.ndarray
+    box: tuple[int, int, int, int]
+    robot: np.ndarray
 
 
 class ObjectTrack(NamedTuple):
     """The reference side: its templates at each blur level drawn so far (level 0, the reference's own sharpness,
-    always), where the object is, and what the sharpness estimate compares."""
+    always), where the object is, and what the sharpness estimate and the appearance comparisons cover."""
 
     size: tuple[int, int]  # (H, W) of the reference frames
     region: tuple[int, int, int, int]  # (x0, y0, x1, y1): where the generated video's object is looked for
@@ -111,24 +116,15 @@ class ObjectTrack(NamedTuple):
     frames: np.ndarray  # (T, H, W, 3) uint8: the reference frames
     scene: np.ndarray  # (T, H, W) bool: the pixels of the sharpness estimate (neither robot nor object, grown)
     levels: dict  # blur level → its Level, filled on first use (`at_blur`)
-    vacated: np.ndarray | None  # (T, h, w) bool inside `vacated_box`: the object's frame-0 pixels the reference
-    #   shows vacated at each frame; None where it vacates fewer than MIN_PIXELS (per 128² px) in every frame
-    vacated_box: tuple[int, int, int, int]  # (x0, y0, x1, y1): the object's frame-0 box grown by VACATED_CROP
+    vacated: Area | None  # the object's frame-0 pixels the reference shows vacated at each frame; None where it
+    #   vacates fewer than MIN_PIXELS (per 128² px) in every frame
+    turn_area: Area | None  # the object's pixels at frame 0 and at each frame, in sight in both; None where those
+    #   of one and not the other are fewer than MIN_PIXELS (per 128² px) in every frame
 
     @property
     def templates(self) -> list[Template | None]:
         """A template per frame at the reference's sharpness (None where too little of the object is visible)."""
         return self.levels[0.0].templates
-
-    @property
-    def turns(self) -> list[Template]:
-        """The first used template turned by each of ANGLES."""
-        return self.levels[0.0].turns
-
-    @property
-    def angles(self) -> np.ndarray:
-        """θ*_t of every used frame: the reference object's in-plane rotation from the first (rad)."""
-        return self.levels[0.0].angles
 
     @property
     def used(self) -> list[int]:
@@ -158,14 +154,11 @@ class ObjectTrack(NamedTuple):
 
     @property
     def turning(self) -> bool:
-        """Whether the reference object turns visibly in the image (and T5 scores its rotation): its matched
-        rotation and its simulator rotation about the camera's axis both reach ROT_VISIBLE over the used frames (a
-        hand covering part of a resting object changes the match, not the pose)."""
-        if len(self.angles) < 2:
-            return False
-        true = self.true_turn[self.used]
-        return (float(np.abs(quarter_turn(self.angles - self.angles[0])).max()) >= ROT_VISIBLE
-                and float(np.abs(true - true[0]).max()) >= ROT_VISIBLE)
+        """Whether the reference object turns visibly in the image (and T5 scores its appearance): its simulator
+        rotation about the camera's axis reaches ROT_VISIBLE, and the pixels it covers in sight change by at least
+        MIN_PIXELS (per 128² px) in some frame (a hand covering part of a resting object changes neither)."""
+        return (self.turn_area is not None
+                and float(np.abs(self.true_turn - self.true_turn[0]).max()) >= ROT_VISIBLE)
 
     @property
     def scorable(self) -> bool:
@@ -240,62 +233,68 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * grow + 1, 2 * grow + 1))
     scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
                       for i in range(len(frames))])
-    vacated, box = _vacated(labels, label, robot, least)
     region = search_region(templates, frames.shape[1:3])
     return ObjectTrack(frames.shape[1:3], region, points, true_turn, frames, scene,
-                       {0.0: _level(frames, templates, region, 0.0, turns=True)}, vacated, box)
+                       {0.0: _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least))
 
 
-def _vacated(labels: np.ndarray, label: int, robot: np.ndarray,
-             least: float) -> tuple[np.ndarray | None, tuple[int, int, int, int]]:
-    """The object's frame-0 pixels that each reference frame shows vacated (no object, no robot there), cropped to
-    its frame-0 box grown by VACATED_CROP; None where no frame vacates `least` pixels."""
-    start = (labels[0] == label) & ~robot[0]
-    if not start.any():
-        return None, (0, 0, 0, 0)
+def _areas(labels: np.ndarray, label: int, robot: np.ndarray, least: float) -> tuple[Area | None, Area | None]:
+    """The appearance comparisons' pixels (`ObjectTrack.vacated`, `ObjectTrack.turn_area`), cropped to the box of
+    the object's pixels over every frame grown by VACATED_CROP; either None where it covers too little."""
+    obj = (labels == label) & ~robot
+    if not obj[0].any():
+        return None, None
     h, w = labels.shape[1:]
     grow = int(np.ceil(VACATED_CROP * h / 128))
-    ys, xs = np.nonzero(start)
+    ys, xs = np.nonzero(obj.any(axis=0))
     x0, y0 = max(0, int(xs.min()) - grow), max(0, int(ys.min()) - grow)
     x1, y1 = min(w, int(xs.max()) + 1 + grow), min(h, int(ys.max()) + 1 + grow)
+    box = (x0, y0, x1, y1)
     crop = (slice(None), slice(y0, y1), slice(x0, x1))
-    vacated = start[y0:y1, x0:x1] & (labels[crop] == 0) & ~robot[crop]
-    if vacated.reshape(len(vacated), -1).sum(axis=1).max() < least:
-        return None, (x0, y0, x1, y1)
-    return vacated, (x0, y0, x1, y1)
+    obj, free = obj[crop], ~robot[crop]
+    start = obj[0]
+    vacated = start & (labels[crop] == 0) & free
+    in_sight = free & free[:1]
+    changed = (start ^ obj) & in_sight
+
+    def area(where: np.ndarray, counted: np.ndarray) -> Area | None:
+        return Area(where, box, robot[crop]) if counted.reshape(len(counted), -1).sum(axis=1).max() >= least else None
+
+    return area(vacated, vacated), area((start | obj) & in_sight, changed)
 
 
-def vacated_error(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float) -> float:
-    """x_vac (module docstring, step 3): at the place the reference's object left, whether the generated video shows
-    what the reference revealed there (0) or the object still (1); 0 where the reference vacates too little.
-    `frame_idx[k]` is the generated frame shown at the time of the reference's frame k; `blur` the video's
-    sharpness level, at which the reference is drawn."""
-    if track.vacated is None:
+def appearance_error(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
+                     blur: float) -> float:
+    """√(Σ ‖G − R‖² / Σ ‖S − R‖²) over an area's pixels at every frame of the common duration (module docstring,
+    step 3): 0 where the generated video shows there what the reference does, 1 where it shows S, the reference's
+    frame 0 with that frame's robot on top; 0 for no area. `frame_idx[k]` is the generated frame shown at the time
+    of the reference's frame k; `blur` the video's sharpness level, at which the reference is drawn."""
+    if area is None:
         return 0.0
-    x0, y0, x1, y1 = track.vacated_box
+    x0, y0, x1, y1 = area.box
     scale = track.size[0] / 128
 
-    def drawn(frame: np.ndarray, level: float) -> np.ndarray:
+    def drawn(crop: np.ndarray, level: float) -> np.ndarray:
         sigma = float(np.hypot(VACATED_SMOOTH, level)) * scale
-        return cv2.GaussianBlur(frame[y0:y1, x0:x1].astype(np.float32), (0, 0), sigma)
+        return cv2.GaussianBlur(crop.astype(np.float32), (0, 0), sigma)
 
-    start = drawn(track.frames[0], blur)
+    crops = track.frames[:, y0:y1, x0:x1]
     error = own = 0.0
     for k in range(min(len(frame_idx), len(track.frames))):
-        where = track.vacated[k]
+        where = area.where[k]
         if not where.any():
             continue
-        ref = drawn(track.frames[k], blur)
-        error += float(np.sum((drawn(frames[frame_idx[k]], 0.0) - ref)[where] ** 2))
-        own += float(np.sum((start - ref)[where] ** 2))
+        ref = drawn(crops[k], blur)
+        still = np.where(area.robot[k][..., None], crops[k], crops[0])  # the object as at frame 0, the arm as at k
+        error += float(np.sum((drawn(frames[frame_idx[k], y0:y1, x0:x1], 0.0) - ref)[where] ** 2))
+        own += float(np.sum((drawn(still, blur) - ref)[where] ** 2))
     return float(np.sqrt(error / own)) if own > 0 else 0.0
 
 
-def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int], blur: float,
-           turns: bool) -> Level:
+def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int],
+           blur: float) -> Level:
     """`templates` (the reference's, at its own sharpness) redrawn from the frames blurred by `blur` (px per 128)
-    before the matching's smoothing, the reference read at that level and, with `turns`, the first template's turns
-    and the reference's rotations."""
+    before the matching's smoothing, and the reference read at that level."""
     sigma = float(np.hypot(SMOOTH, blur))
     drawn = {k: smoothed(frames[k], sigma) for k, t in enumerate(templates) if t is not None}
     if blur > 0:
@@ -303,30 +302,15 @@ def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[i
                      t._replace(pixels=drawn[k][t.origin[1]:t.origin[1] + t.mask.shape[0],
                                                 t.origin[0]:t.origin[0] + t.mask.shape[1]])
                      for k, t in enumerate(templates)]
-    used = list(drawn)
-    read = np.array([locate(drawn[k], templates[k], region) for k in used]).reshape(-1, 2)
-    if not used or not turns:
-        return Level(templates, [], np.zeros(0), read, None)
-    turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
-    t0 = templates[used[0]]
-    (x0, y0), (th, tw) = t0.origin, t0.mask.shape
-    turns = turned(t0._replace(pixels=smoothed(frames[used[0]], turn_sigma)[y0:y0 + th, x0:x0 + tw]))
-    angles = np.array([orientation(smoothed(frames[k], turn_sigma), turns, templates[k].centre) for k in used])
-    return Level(templates, turns, angles, read, None)
+    read = np.array([locate(drawn[k], templates[k], region) for k in drawn]).reshape(-1, 2)
+    return Level(templates, read)
 
 
-def at_blur(track: ObjectTrack, blur: float, turns: bool) -> Level:
-    """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), with `turns` its turns and
-    rotations and the reference's rotation read at its matched centroids too (level 0 always has the first two)."""
-    level = track.levels.get(blur)
-    if level is None or (turns and not level.turns):
-        level = _level(track.frames, track.templates, track.region, blur, turns)
-    if turns and level.read_turn is None:
-        turn_sigma = float(np.hypot(TURN_SMOOTH, blur))
-        level = level._replace(read_turn=np.array([orientation(smoothed(track.frames[k], turn_sigma), level.turns, c)
-                                                   for k, c in zip(track.used, level.read)]))
-    track.levels[blur] = level
-    return level
+def at_blur(track: ObjectTrack, blur: float) -> Level:
+    """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), made on first use."""
+    if blur not in track.levels:
+        track.levels[blur] = _level(track.frames, track.templates, track.region, blur)
+    return track.levels[blur]
 
 
 def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
@@ -341,40 +325,6 @@ def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
             drawn = cv2.GaussianBlur(ref, (0, 0), blur * scale) if blur > 0 else ref
             costs[i] += float(np.sum((drawn[scene] - shown) ** 2))
     return BLURS[int(np.argmin(costs))]
-
-
-def turned(t: Template) -> list[Template]:
-    """`t` turned about its centroid by each of ANGLES (colours linear, mask nearest); each result's `centre` is its
-    centroid's offset inside its own box, `origin` (0, 0)."""
-    h, w = t.mask.shape
-    side = int(np.ceil(np.hypot(h, w))) + 2
-    centre_in = t.centre - np.array(t.origin)
-    out = []
-    for a in ANGLES:
-        m = cv2.getRotationMatrix2D((float(centre_in[0]), float(centre_in[1])), float(np.rad2deg(a)), 1.0)
-        m[:, 2] += (side - 1) / 2 - centre_in  # the centroid lands at the canvas centre
-        pixels = cv2.warpAffine(t.pixels, m, (side, side), flags=cv2.INTER_LINEAR)
-        mask = cv2.warpAffine(t.mask, m, (side, side), flags=cv2.INTER_NEAREST)
-        out.append(Template((0, 0), pixels, mask, np.array([(side - 1) / 2, (side - 1) / 2])))
-    return out
-
-
-def orientation(frame: np.ndarray, turns: list[Template], centre: np.ndarray) -> float:
-    """The angle of ANGLES whose turned template best matches a smoothed frame with its centroid at `centre`
-    (within 1 px; masked SSD per mask pixel)."""
-    side = turns[0].mask.shape[0]
-    x0 = int(round(centre[0] - (side - 1) / 2)) - 1
-    y0 = int(round(centre[1] - (side - 1) / 2)) - 1
-    pad = side + 2
-    h, w = frame.shape[:2]
-    if x0 < 0 or y0 < 0 or x0 + pad > w or y0 + pad > h:
-        window = cv2.copyMakeBorder(frame, pad, pad, pad, pad, cv2.BORDER_REPLICATE)[y0 + pad:y0 + 2 * pad,
-                                                                                  x0 + pad:x0 + 2 * pad]
-    else:
-        window = frame[y0:y0 + pad, x0:x0 + pad]
-    costs = [float(cv2.matchTemplate(window, t.pixels, cv2.TM_SQDIFF, mask=t.mask).min()) / max(int(t.mask.sum()), 1)
-             for t in turns]
-    return float(ANGLES[int(np.argmin(costs))])
 
 
 def search_region(templates: list[Template | None], size: tuple[int, int]) -> tuple[int, int, int, int]:
@@ -418,53 +368,43 @@ def locate(frame: np.ndarray, t: Template, region: tuple[int, int, int, int]) ->
 
 class Positions(NamedTuple):
     """The object in a generated video and in the reference at the reference's used frames within the common
-    duration: positions p̂, p* (N, 2) px, in-plane rotations θ̂, θ* (N,) rad, and the frames' indices."""
+    duration: positions p̂, p* (N, 2) px, the frames' indices, and the errors that need no position."""
 
     found: np.ndarray
     reference: np.ndarray
-    turn: np.ndarray
-    reference_turn: np.ndarray
     frames: list[int]
     scale: float  # frame height / 128
     blur: float  # the video's blur level (px per 128) the templates were drawn at
-    vacated: float  # x_vac: the error at the place the object left (`vacated_error`)
-    by_turn: bool  # whether the object turns in place (scored by its rotation) rather than travels
+    vacated: float  # x_vac: the error at the place the object left
+    turned: float  # x_turn: the error on the object's own pixels, where it turns in place (`by_turn`); else 0
+    by_turn: bool  # whether the object turns in place (scored by its appearance) rather than travels
 
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
-    """Where and how turned a generated video shows the object; `frame_idx[k]` is its frame shown at the time of the
-    reference's frame k. The templates are drawn at the video's own sharpness (`sharpness`)."""
+    """Where a generated video shows the object, and its appearance errors; `frame_idx[k]` is its frame shown at the
+    time of the reference's frame k. The templates are drawn at the video's own sharpness (`sharpness`)."""
     used = [k for k in track.used if k < len(frame_idx)]
     if not used:
         raise ValueError("the reference object is never in sight")
-    by_turn = not track.moving and track.turning  # an object turning in place: its rotation is what can be seen
+    by_turn = not track.moving and track.turning
     blur = sharpness(frames, track, frame_idx)
-    level = at_blur(track, blur, by_turn)
-    found, turn = [], []
-    for k in used:
-        frame, t = frames[frame_idx[k]], level.templates[k]
-        centroid = locate(smoothed(frame), t, track.region)
-        found.append(centroid)
-        turn.append(orientation(smoothed(frame, TURN_SMOOTH), level.turns, centroid) if by_turn else 0.0)
+    level = at_blur(track, blur)
+    found = np.array([locate(smoothed(frames[frame_idx[k]]), level.templates[k], track.region) for k in used])
     offset = track.points[used] - np.array([level.templates[k].centre for k in used])  # to the projected position
-    return Positions(np.array(found) + offset, level.read[: len(used)] + offset, np.array(turn),
-                     quarter_turn(level.read_turn[: len(used)] - level.read_turn[0]) if by_turn
-                     else np.zeros(len(used)),
-                     used, track.size[0] / 128, blur, vacated_error(frames, track, frame_idx, blur), by_turn)
+    turned = appearance_error(frames, track, track.turn_area, frame_idx, blur) if by_turn else 0.0
+    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur,
+                     appearance_error(frames, track, track.vacated, frame_idx, blur), turned, by_turn)
 
 
 def relative_error(p: Positions) -> float:
     """x (module docstring, step 3): the larger of x_vac and, for an object whose image travels, max(x_d, x_v), for
-    one that turns in place, its rotation and position error."""
+    one that turns in place, x_turn."""
     return max(_motion_error(p), p.vacated)
 
 
 def _motion_error(p: Positions) -> float:
-    if p.by_turn:  # turning in place: it must turn as the reference's and stay where the reference's is
-        wrong = float(np.sqrt(np.mean(quarter_turn(p.turn - p.turn[0] - p.reference_turn) ** 2)))
-        turned_by = float(np.sqrt(np.mean(p.reference_turn ** 2)))
-        x_r = wrong / (turned_by if turned_by > 0 else ROT_VISIBLE)  # as the position, against the least visible
-        return max(x_r, _rms(p.found - p.reference) / (MIN_TRAVEL * p.scale))
+    if p.by_turn:
+        return p.turned
     moved = p.reference - p.reference[0]
     motion = float(np.sqrt(np.mean(np.sum(moved ** 2, axis=1))))
     if motion == 0:
@@ -476,11 +416,6 @@ def _motion_error(p: Positions) -> float:
     if len(pairs) and (speed := _rms(v_star)) > 0:
         x = max(x, _rms(p.found[pairs[:, 1]] - p.found[pairs[:, 0]] - v_star) / speed)
     return x
-
-
-def quarter_turn(angle: np.ndarray) -> np.ndarray:
-    """Angles (rad) wrapped into [−π/4, π/4): a box's image looks the same a quarter turn on."""
-    return (np.asarray(angle) + np.pi / 4) % (np.pi / 2) - np.pi / 4
 
 
 def _rms(v: np.ndarray) -> float:

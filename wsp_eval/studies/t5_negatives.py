@@ -233,8 +233,9 @@ def plot(summary: dict, path: Path) -> None:
         ax.set_ylim(0, 100)
         ax.set_ylabel("mean score")
         ax.set_title(f"{platform}: positives (left) and negatives")
-        ax.legend(fontsize=8, loc="upper right")
-    fig.tight_layout()
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=2, fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
