@@ -368,7 +368,8 @@ def locate(frame: np.ndarray, t: Template, region: tuple[int, int, int, int]) ->
 
 class Positions(NamedTuple):
     """The object in a generated video and in the reference at the reference's used frames within the common
-    duration: positions p̂, p* (N, 2) px, the frames' indices, and the errors that need no position."""
+    duration: positions p̂, p* (N, 2) px and the frames' indices (none where the object is scored by its turn), and
+    the errors that need no position."""
 
     found: np.ndarray
     reference: np.ndarray
@@ -388,12 +389,16 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
         raise ValueError("the reference object is never in sight")
     by_turn = not track.moving and track.turning
     blur = sharpness(frames, track, frame_idx)
+    vacated = appearance_error(frames, track, track.vacated, frame_idx, blur)
+    if by_turn:  # scored on its own pixels: no position is read
+        none = np.zeros((0, 2))
+        return Positions(none, none, [], track.size[0] / 128, blur, vacated,
+                         appearance_error(frames, track, track.turn_area, frame_idx, blur), True)
     level = at_blur(track, blur)
     found = np.array([locate(smoothed(frames[frame_idx[k]]), level.templates[k], track.region) for k in used])
     offset = track.points[used] - np.array([level.templates[k].centre for k in used])  # to the projected position
-    turned = appearance_error(frames, track, track.turn_area, frame_idx, blur) if by_turn else 0.0
-    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur,
-                     appearance_error(frames, track, track.vacated, frame_idx, blur), turned, by_turn)
+    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur, vacated,
+                     0.0, False)
 
 
 def relative_error(p: Positions) -> float:
