@@ -367,6 +367,34 @@ def t3_operator_runs():
     return ref, out
 
 
+def test_t3_sources_share_the_rigs_state_simulator(t3_operator_runs):
+    """A T3 build rig hands every source of its task its one state-only simulator (a worker holds one per task,
+    not one per source). On it, after the other sources ran there, each operator gives the stream it gives on a
+    simulator of its own, as does a policy; closing the sources leaves the simulator open, and the expert's
+    stream on it is the one an expert of its own gives."""
+    from wsp_data.builders import BuildConfig
+    from wsp_data.builders.t3 import OPERATOR_GROUPS, POLICY_GROUPS, T3Builder
+    from wsp_data.platforms.aloha.t3 import AlohaPolicySource
+
+    expert, runs = t3_operator_runs
+    builder = T3Builder(BuildConfig("t3", "aloha", 8, ("lift_cube",)))
+    own = AlohaPolicySource("lift_cube", "late")
+    try:
+        rig = builder.rig("lift_cube")
+        policy = rig.stream("policy_late", T3_SEED).actions  # first on the shared simulator
+        for op in OPERATOR_GROUPS:
+            assert rig.source(op).platform is rig.state
+            assert np.array_equal(rig.stream(op, T3_SEED).actions, runs[op].actions), op
+        assert rig.source("policy_late").platform is rig.state
+        assert np.array_equal(policy, own.trajectory(T3_SEED)[0])
+        for group in (*OPERATOR_GROUPS, *POLICY_GROUPS):
+            rig.source(group).close()
+        assert np.array_equal(rig.expert.trajectory(T3_SEED), expert)
+    finally:
+        own.close()
+        builder.close()
+
+
 def test_t3_operator_styles_are_what_the_docs_say(t3_operator_runs):
     expert, runs = t3_operator_runs
     jerk = lambda a: float(np.abs(np.diff(a[:, JOINT_DIMS], 2, axis=0)).mean())  # noqa: E731

@@ -54,6 +54,31 @@ def test_expert_stream_is_a_verified_success_and_replays_bit_identically(expert,
     assert np.array_equal(s.stack("object_poses"), a.stack("object_poses"), equal_nan=True)
 
 
+def test_a_rig_runs_its_expert_on_its_rendering_env(expert):
+    """A task rig holds one MuJoCo model: its expert and unrendered replays run on the rendering env with rendering
+    off, and give what a state-only env of their own gives; the view's `close` leaves the env open."""
+    from wsp_data.platforms import kit
+
+    rig_expert, render = kit("libero").rig_simulators(TASK)
+    try:
+        view = rig_expert.replayer
+        assert view.env is render.env and not view.render and render.render
+        actions = rig_expert.trajectory(0)
+        assert np.array_equal(actions, expert.trajectory(0))
+        unrendered, rendered = view.replay(0, actions), render.replay(0, actions)
+        own = expert.replayer.replay(0, actions)
+        assert unrendered.observations[-1].rgb is None and rendered.observations[-1].rgb is not None
+        for key in ("qpos", "tcp_pose", "object_poses", "contacts"):
+            assert np.array_equal(unrendered.stack(key), own.stack(key), equal_nan=True), key
+            assert np.array_equal(rendered.stack(key), own.stack(key), equal_nan=True), key
+        rig_expert.close()
+        view.close()
+        assert render.replay(0, actions[:5]).observations[-1].rgb.shape == (128, 128, 3)
+    finally:
+        render.close()
+    assert render.env is None  # closed: the env's memory goes now, not with the object
+
+
 def test_scene_seeds_lay_out_different_scenes_and_leave_numpy_alone(render):
     np.random.seed(123)
     before = np.random.random()

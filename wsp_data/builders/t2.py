@@ -106,8 +106,9 @@ def collision_problem(k: PlatformKit, qpos, tcp_pose, object_poses, actions) -> 
 
 # -- builder -----------------------------------------------------------------------------------------------
 class _TaskRig:
-    """One task in one worker: its expert source (donor streams, state-only replays), typical arm stream and
-    a rendering env created when the task is first a receiver."""
+    """One task in one worker: its expert source (donor streams, state-only replays), and what is made only when
+    first asked for: its typical arm stream and a rendering env (when the task is a receiver). A task that is
+    only a donor holds one state-only simulator."""
 
     def __init__(self, task: str, platform: str):
         self.task, self.platform, self.kit = task, platform, kit(platform)
@@ -115,13 +116,18 @@ class _TaskRig:
         self.spec = self.expert.spec
         self.state = self.expert.replayer
         self.qlimits = self.state.qlimits
-        self.typical = typical_arm_stream(self.expert, self.kit)
         self._render = None
+
+    def typical(self) -> np.ndarray:
+        """The task's typical arm stream (`typical_arm_stream`: 8 expert runs); `T2Builder.typical` keeps it."""
+        return typical_arm_stream(self.expert, self.kit)
 
     @property
     def render(self):
         if self._render is None:
-            self._render = self.kit.make_renderer(self.task, self.spec.objects)
+            expert, self._render = self.kit.rig_simulators(self.task, self.expert)
+            if expert is not self.expert:  # the platform closed it and runs a new one on the rendering simulator
+                self.expert, self.state = expert, expert.replayer
         return self._render
 
     def close(self) -> None:
@@ -166,7 +172,7 @@ class T2Builder(SourceSurvey, SuiteBuilder):
     def typical(self, task: str) -> np.ndarray:
         """`task`'s typical arm stream (`typical_arm_stream`), computed once per worker."""
         if task not in self._typical:
-            self._typical[task] = self.rig(task).typical
+            self._typical[task] = self.rig(task).typical()
         return self._typical[task]
 
     def compatible_donors(self, receiver: str) -> list[str]:

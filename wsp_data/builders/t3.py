@@ -49,7 +49,7 @@ class _Rig(TaskRig):
 
     def source(self, group: str) -> T3Source:
         if group not in self._sources:
-            self._sources[group] = self.kit.t3_source(self.task, group)
+            self._sources[group] = self.kit.t3_source(self.task, group, self.state)
         return self._sources[group]
 
     def stream(self, group: str, seed: int) -> SourceStream:

@@ -66,7 +66,7 @@ class BCPolicySource(ABC):
     TASKS: tuple[str, ...]
     checkpoint_path: Callable[..., Path]
 
-    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None, simulator=None):
         if task not in self.TASKS:
             raise KeyError(f"no policy for task {task!r}; T3 tasks: {', '.join(self.TASKS)}")
         if stage not in STAGES:
@@ -80,7 +80,7 @@ class BCPolicySource(ABC):
         if self.meta["feature_names"] != self.feature_names():
             raise ValueError(f"{self.path} was trained on other state features than this code computes")
         self.ref_length = float(self.meta["expert_mean_length"])
-        self._platform = None
+        self._platform, self._owns = simulator, simulator is None  # a given simulator stays open at `close`
         self.observations: list = []  # the T+1 observations of the last trajectory() (frame 0 = after reset)
 
     # -- what a platform provides --------------------------------------------------------------------
@@ -107,9 +107,9 @@ class BCPolicySource(ABC):
         return self._platform
 
     def close(self) -> None:
-        if self._platform is not None:
+        if self._owns and self._platform is not None:
             self._platform.close()
-            self._platform = None
+        self._platform = None
 
     def __enter__(self):
         return self

@@ -183,10 +183,9 @@ class TaskRig:
 
     def __init__(self, task: str, platform: str):
         self.kit = kit(platform)
-        self.expert = self.kit.make_expert(task)
+        self.expert, self.render = self.kit.rig_simulators(task)
         self.spec = self.expert.spec
         self.state = self.expert.replayer
-        self.render = self.kit.make_renderer(task, self.spec.objects)
         self.qlimits = self.state.qlimits
 
     def close(self) -> None:

@@ -217,6 +217,23 @@ class PlatformKit(ABC):
             once per task per build worker, after an unrendered replay passed validation.
         """
 
+    def rig_simulators(self, task: str, expert: ExpertSource | None = None) -> tuple[ExpertSource, Replayer]:
+        """A task rig's expert and rendering replayer (`wsp_data.platforms.contract.TaskRig`).
+
+        Args:
+            expert: the task's expert where the caller has one already (`make_expert(task)`, T2's donor); a
+                platform that returns another closes it first, so that the two are never held at once.
+        Returns:
+            (`expert` or `make_expert(task)`, `make_renderer(task, its spec's objects)`) by default: two
+            simulators. A platform whose rendering simulator steps as cheaply as a state-only one when it does
+            not render overrides this to run a new expert, and the rig's unrendered replays, on the rendering
+            simulator (LIBERO: one MuJoCo model per rig instead of two).
+        Called:
+            once per task rig (T1, T3, T4, T5, train; T2's receivers).
+        """
+        expert = expert or self.make_expert(task)
+        return expert, self.make_renderer(task, expert.spec.objects)
+
     @abstractmethod
     def joint_stream(self, rollout: Rollout) -> np.ndarray:
         """The joint targets the common joint-limit check reads.
@@ -266,12 +283,16 @@ class PlatformKit(ABC):
         """
         raise NotSupported(self.unsupported("t3"))
 
-    def t3_source(self, task: str, group: str) -> T3Source:
+    def t3_source(self, task: str, group: str, simulator=None) -> T3Source:
         """The T3 action source of `group` on `task`.
 
         Args:
             group: "H1" … "H5" (scripted operator models, whose streams are kept whether they succeed or fail)
                 or "policy_early" / "policy_late" (behaviour-cloning checkpoints).
+            simulator: a state-only simulator of `task` (the rig's unrendered replayer, `make_expert(task)
+                .replayer`) for the source to run on and leave open; None: the source opens its own. The T3
+                builder hands every source of a task the same one, so a worker holds one state-only simulator
+                per task, not one per source.
         Returns:
             a `wsp_data.platforms.t3_sources.T3Source`: `.stream(seed) -> SourceStream` (the actions, None when
             the source gives no stream, and the provenance: a JSON-able dict stored as `source_provenance`, whose

@@ -84,12 +84,12 @@ class AlohaKit(PlatformKit):
 
         return T3_TASKS
 
-    def t3_source(self, task: str, group: str):
+    def t3_source(self, task: str, group: str, simulator=None):
         from wsp_data.platforms.aloha.t3 import AlohaOperatorSource, AlohaPolicySource
 
         if group.startswith("policy_"):
-            return AlohaPolicySource(task, group.removeprefix("policy_"))
-        return AlohaOperatorSource(task, group)
+            return AlohaPolicySource(task, group.removeprefix("policy_"), simulator=simulator)
+        return AlohaOperatorSource(task, group, simulator)
 
     def expert_script(self, task: str) -> str:
         from wsp_data.platforms.aloha.t3 import expert_script

@@ -131,15 +131,17 @@ class OperatorScript(Script):
 
 
 class AlohaOperatorSource(ScriptedOperatorSource):
-    """One scripted operator model (H1–H5) on one ALOHA task, on its own state-only platform."""
+    """One scripted operator model (H1–H5) on one ALOHA task, on a state-only platform: `simulator` (the
+    caller's, left open) or its own."""
 
-    def __init__(self, task: str, operator: str):
+    def __init__(self, task: str, operator: str, simulator: AlohaPlatform | None = None):
         style = operator_style(OPERATORS, operator)
         if task not in T3_TASKS:
             raise KeyError(f"no operator models for task {task!r}; T3 tasks: {', '.join(T3_TASKS)}")
         self.task, self.operator, self.style = task, operator, style
         self.spec = aloha_task(task)
-        self.platform = AlohaPlatform(task, render=False, objects=self.spec.objects)
+        self._owns = simulator is None
+        self.platform = AlohaPlatform(task, render=False, objects=self.spec.objects) if self._owns else simulator
 
     def attempt(self, seed: int) -> OperatorAttempt:
         """The operator's (T, 14) float32 stream from scene `seed` (cut at its step budget) and whether it ends
@@ -159,7 +161,8 @@ class AlohaOperatorSource(ScriptedOperatorSource):
                 "step_budget": int(ax.MAX_STEPS * OPERATOR_STEP_BUDGET), **self.style}
 
     def close(self) -> None:
-        self.platform.close()
+        if self._owns:
+            self.platform.close()
 
 
 def expert_script(task: str) -> str:
@@ -210,8 +213,9 @@ class AlohaPolicySource(BCPolicySource):
     TASKS = T3_TASKS
     checkpoint_path = staticmethod(checkpoint_path)
 
-    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        super().__init__(task, stage, checkpoint_dir)
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None,
+                 simulator: AlohaPlatform | None = None):
+        super().__init__(task, stage, checkpoint_dir, simulator)
         self.spec = aloha_task(task)
 
     def feature_names(self) -> list[str]:

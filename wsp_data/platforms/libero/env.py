@@ -14,6 +14,7 @@ seed and stream give bit-identical rollouts whatever ran before.
 from __future__ import annotations
 
 import contextlib
+import copy
 import io
 import logging
 import os
@@ -105,15 +106,28 @@ class LiberoPlatform:
         self.track(tuple(objects) if objects is not None else tuple(self.u.obj_of_interest))
         self._scenes: dict[int, tuple[np.ndarray, ...]] = {}
         self._fk = mujoco.MjData(self.model)
+        self._owner = True  # False on an `unrendered` view: its `close` leaves the env open
 
     # -- lifecycle ------------------------------------------------------------------------------
+    def unrendered(self) -> LiberoPlatform:
+        """This env as a state-only platform: the same simulator, scene cache and tracked objects, observations
+        without images (its steps cost what a state-only env's do). Closing it leaves the env open."""
+        view = copy.copy(self)
+        view.render, view._owner = False, False
+        return view
+
     def close(self) -> None:
+        """Free the env (a view from `unrendered` leaves it to its platform) and drop the references to it, so
+        that its memory returns now, not when this object goes."""
+        if not self._owner or self.env is None:
+            return
         ctx = self.sim._render_context_offscreen if self.render else None
         if ctx is not None:  # MuJoCo frees GL objects in whichever context is current: make it this env's own
             ctx.gl_ctx.make_current()
             ctx.con.free()
             ctx.gl_ctx.free()
         self.env.close()
+        self.env = self.u = self.sim = self.model = self.data = self.robot = self._fk = None
 
     def __enter__(self) -> LiberoPlatform:
         return self

@@ -299,13 +299,17 @@ TASKS: dict[str, LiberoTaskSpec] = {name: task_spec(name) for name in BENCHMARK_
 class LiberoExpertSource:
     """Scripted, verified expert streams for one LIBERO task."""
 
-    def __init__(self, task: str):
+    def __init__(self, task: str, simulator: LiberoPlatform | None = None):
+        """`simulator`: an unrendered platform of the task to run on (the caller's, left open at `close`); None:
+        a state-only env of its own."""
         self.spec = task_spec(task)
-        self.replayer = LiberoPlatform(task, render=False, objects=self.spec.objects)
+        self._owns = simulator is None
+        self.replayer = LiberoPlatform(task, render=False, objects=self.spec.objects) if self._owns else simulator
         self._cache: dict[int, np.ndarray | None] = {}
 
     def close(self) -> None:
-        self.replayer.close()
+        if self._owns:
+            self.replayer.close()
 
     def trajectory(self, seed: int) -> np.ndarray | None:
         """The (T, 7) OSC stream that solves the task at scene `seed`, or None if the script fails."""

@@ -39,9 +39,9 @@ class LiberoKit(PlatformKit):
     gripper_dim = 6
     gripper_open = -1.0
     default_counts = {"t1": 1000, "t2": 1500, "t3": 1000, "t4": 1000, "t5": 2000}  # paper Table S3 (spec §3)
-    rigs_per_worker = 1  # a LIBERO rig (a state-only and a rendering simulator) holds ≈ 1.3 GB beside ≈ 1.1 GB
-    #   that the first leaves behind, and takes 2–5 s to create against 20–80 s per slot; a build orders its slots
-    #   by task (`wsp_data.build.by_simulator`), so one rig per worker is rarely re-created
+    rigs_per_worker = 1  # a LIBERO rig (one model: `rig_simulators`) holds ≈ 0.8 GB beside ≈ 1.15 GB that the
+    #   first env leaves behind, and takes 2–5 s to create against 20–80 s per slot; a build orders its slots by
+    #   task (`wsp_data.build.by_simulator`), so one rig per worker is rarely re-created
 
     # -- core ---------------------------------------------------------------------------------------------
     def tasks(self) -> dict:
@@ -59,6 +59,17 @@ class LiberoKit(PlatformKit):
 
         return LiberoPlatform(task, render=True, objects=objects)
 
+    def rig_simulators(self, task: str, expert=None):
+        # a rig's expert and unrendered replays run on its rendering env with rendering off (the same model: a
+        # state-only env would hold a second copy, ≈ 0.55 GB); every replay resets, so sharing changes no rollout
+        from wsp_data.platforms.libero.env import LiberoPlatform
+        from wsp_data.platforms.libero.experts import LiberoExpertSource, task_spec
+
+        if expert is not None:  # replaced: closed before the new env is made
+            expert.close()
+        render = LiberoPlatform(task, render=True, objects=task_spec(task).objects)
+        return LiberoExpertSource(task, render.unrendered()), render
+
     def joint_stream(self, rollout: Rollout) -> np.ndarray:
         return rollout.alt_actions  # the native stream is OSC deltas; beside it: the joint positions reached
 
@@ -75,12 +86,12 @@ class LiberoKit(PlatformKit):
 
         return T3_TASKS
 
-    def t3_source(self, task: str, group: str):
+    def t3_source(self, task: str, group: str, simulator=None):
         from wsp_data.platforms.libero.t3 import LiberoOperatorSource, LiberoPolicySource
 
         if group.startswith("policy_"):
-            return LiberoPolicySource(task, group.removeprefix("policy_"))
-        return LiberoOperatorSource(task, group)
+            return LiberoPolicySource(task, group.removeprefix("policy_"), simulator=simulator)
+        return LiberoOperatorSource(task, group, simulator)
 
     def expert_script(self, task: str) -> str:
         return "libero_experts.PickPlaceScript"  # the released provenance string (the module's former name)

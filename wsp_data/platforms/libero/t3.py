@@ -93,12 +93,14 @@ class OperatorScript(PickPlaceScript):
 
 
 class LiberoOperatorSource(ScriptedOperatorSource):
-    """One scripted operator model (H1–H5) on one LIBERO task, on its own state-only env."""
+    """One scripted operator model (H1–H5) on one LIBERO task, on a state-only env: `simulator` (the caller's,
+    left open) or its own."""
 
-    def __init__(self, task: str, operator: str):
+    def __init__(self, task: str, operator: str, simulator: LiberoPlatform | None = None):
         self.task, self.operator, self.style = task, operator, operator_style(OPERATORS, operator)
         self.spec = task_spec(task)
-        self.platform = LiberoPlatform(task, render=False, objects=self.spec.objects)
+        self._owns = simulator is None
+        self.platform = LiberoPlatform(task, render=False, objects=self.spec.objects) if self._owns else simulator
 
     def attempt(self, seed: int) -> OperatorAttempt:
         s = OperatorScript(self.platform, self.spec, seed, self.style)
@@ -114,7 +116,8 @@ class LiberoOperatorSource(ScriptedOperatorSource):
                 "model": "wsp_data.sources.libero_t3.OperatorScript", **self.style}
 
     def close(self) -> None:
-        self.platform.close()
+        if self._owns:
+            self.platform.close()
 
 
 # -- policies ---------------------------------------------------------------------------------------
@@ -147,8 +150,9 @@ class LiberoPolicySource(BCPolicySource):
     TASKS = T3_TASKS
     checkpoint_path = staticmethod(checkpoint_path)
 
-    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        super().__init__(task, stage, checkpoint_dir)
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None,
+                 simulator: LiberoPlatform | None = None):
+        super().__init__(task, stage, checkpoint_dir, simulator)
         self.spec = task_spec(task)
 
     def feature_names(self) -> list[str]:

@@ -54,14 +54,14 @@ class ManiSkillKit(PlatformKit):
 
         return T3_TASKS
 
-    def t3_source(self, task: str, group: str):
+    def t3_source(self, task: str, group: str, simulator=None):
         if group.startswith("policy_"):
             from wsp_data.platforms.maniskill.t3 import PolicySource
 
-            return PolicySource(task, group.removeprefix("policy_"))
+            return PolicySource(task, group.removeprefix("policy_"), simulator=simulator)
         from wsp_data.platforms.maniskill.t3 import OperatorSource
 
-        return OperatorSource(task, group)
+        return OperatorSource(task, group, simulator)
 
     def expert_script(self, task: str) -> str:
         return f"experts.{task}"

@@ -308,15 +308,18 @@ class OperatorScript(SkillScript):
 class OperatorSource(ScriptedOperatorSource):
     """Scripted operator trajectories for one task, replayed and judged under `pd_joint_pos`."""
 
-    def __init__(self, task: str, operator: str):
+    def __init__(self, task: str, operator: str, simulator: ManiSkillPlatform | None = None):
         self.style = EXPERT_STYLE if operator == EXPERT_STYLE.name else operator_style(OPERATORS, operator)
         self.spec = task_spec(task)
         self.script = OperatorScript(self.spec.name, self.spec.objects, self.style)
-        self.replayer = ManiSkillPlatform(self.spec.name, render=False, objects=self.spec.objects)
+        self._owns = simulator is None
+        self.replayer = (ManiSkillPlatform(self.spec.name, render=False, objects=self.spec.objects) if self._owns
+                         else simulator)
 
     def close(self) -> None:
         self.script.close()
-        self.replayer.close()
+        if self._owns:
+            self.replayer.close()
 
     @property
     def provenance(self) -> dict:
@@ -408,8 +411,9 @@ class PolicySource(BCPolicySource):
     TASKS = T3_TASKS
     checkpoint_path = staticmethod(checkpoint_path)
 
-    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None):
-        super().__init__(task, stage, checkpoint_dir)
+    def __init__(self, task: str, stage: str, checkpoint_dir: Path | str | None = None,
+                 simulator: ManiSkillPlatform | None = None):
+        super().__init__(task, stage, checkpoint_dir, simulator)
         self._limits = np.asarray(self.meta["arm_limits"], dtype=np.float64)  # (7, 2) rad
         self.goal: np.ndarray | None = None  # the goal of the current episode of the own platform
 
