@@ -44,13 +44,23 @@ def test_bounded_cache_closes_the_least_recently_used():
     assert c.closed and b2.closed
 
 
+def test_close_where_closes_only_the_rigs_it_names():
+    Recorder.made = []
+    cache = RigCache(Recorder, capacity=3)
+    a, b, c = cache("a"), cache("b"), cache("c")
+    cache.close_where(lambda key, rig: key != ("b",) and rig is not c)
+    assert a.closed and not b.closed and not c.closed
+    assert cache("b") is b and cache("a") is not a  # kept, and made anew
+    cache.close()
+
+
 def test_capacity_must_hold_a_rig():
     with pytest.raises(ValueError, match="at least one rig"):
         RigCache(Recorder, capacity=0)
 
 
 def test_platform_bounds():
-    """LIBERO's rigs (≈ 1.3 GB each) are bounded to one; ManiSkill's are kept per task."""
+    """LIBERO's rigs (≈ 0.8 GB each) are bounded to one; ManiSkill's are kept per task."""
     assert kit("libero").rigs_per_worker == 1 and kit("maniskill").rigs_per_worker is None
 
 

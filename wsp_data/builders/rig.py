@@ -40,6 +40,14 @@ class RigCache(Generic[R]):
         self._rigs[key] = rig = self._factory(*key)
         return rig
 
+    def close_where(self, condition: Callable[[tuple, R], bool]) -> None:
+        """Close and forget the rigs for which `condition(key, rig)` holds."""
+        keys = [k for k, rig in self._rigs.items() if condition(k, rig)]
+        for key in keys:
+            self._rigs.pop(key).close()
+        if keys:
+            return_freed_memory()
+
     def close(self) -> None:
         for rig in self._rigs.values():
             rig.close()

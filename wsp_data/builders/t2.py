@@ -123,6 +123,11 @@ class _TaskRig:
         return typical_arm_stream(self.expert, self.kit)
 
     @property
+    def rendering(self) -> bool:
+        """Whether the rig holds a rendering simulator (it has been a receiver)."""
+        return self._render is not None
+
+    @property
     def render(self):
         if self._render is None:
             expert, self._render = self.kit.rig_simulators(self.task, self.expert)
@@ -184,6 +189,9 @@ class T2Builder(SourceSurvey, SuiteBuilder):
 
     def attempt(self, plan: SlotPlan, seed: int, rng: np.random.Generator) -> Kept | Dropped:
         donors = self.compatible_donors(plan.task)
+        if self.kit.rigs_per_worker is not None:  # bounded: an earlier receiver's rendering env goes first (its
+            #   task, if drawn as a donor, is made anew state-only), so a worker never holds two rendering envs
+            self.rig.close_where(lambda key, rig: key != (plan.task,) and rig.rendering)
         receiver = self.rig(plan.task)  # after the typical streams: a bounded cache keeps it and the donor's rig
         if not donors:
             return Dropped("no_compatible_donor")
