@@ -289,8 +289,8 @@ class PlatformKit(ABC):
         Args:
             group: "H1" … "H5" (scripted operator models, whose streams are kept whether they succeed or fail)
                 or "policy_early" / "policy_late" (behaviour-cloning checkpoints).
-            simulator: a state-only simulator of `task` (the rig's unrendered replayer, `make_expert(task)
-                .replayer`) for the source to run on and leave open; None: the source opens its own. The T3
+            simulator: an unrendered simulator of `task` (the rig's, `TaskRig.state`: its expert's replayer)
+                for the source to run on and leave open; None: the source opens its own. The T3
                 builder hands every source of a task the same one, so a worker holds one state-only simulator
                 per task, not one per source.
         Returns:
