@@ -23,8 +23,8 @@ from wsp_eval import backends as registry
 from wsp_eval.backends import BackendSpec
 from wsp_eval.baselines import blur
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_error, fidelity, object_track, positions,
-                                   relative_error)
+from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_error, appearance_terms, fidelity, object_track,
+                                   pooled, positions, relative_error, windowed)
 from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
 from wsp_eval.score import ScoreError, score_submission
 from wsp_eval.studies import t5_negatives
@@ -129,7 +129,7 @@ def test_the_error_of_a_translated_object_is_exact():
     """A synthetic clip: a textured square moving 1 px a frame on a flat background; a generated video that moves
     it half as far has relative displacement error 0.5 (velocity error 0.5 too); one that moves it exactly, 0. The
     half video also still covers part of the place the reference's square left, so its x (the larger of that
-    error and x_vac) is higher still."""
+    error and the appearance errors) is higher still."""
     n, size = 24, 64
     rng = np.random.default_rng(0)
     patch = rng.integers(0, 255, (8, 8, 3), dtype=np.uint8)
@@ -150,7 +150,7 @@ def test_the_error_of_a_translated_object_is_exact():
     exact = relative_error(positions(ref, track, np.arange(n)))
     assert exact == 0.0  # the reference read exactly as the video is
     half = positions(video(0.5)[0], track, np.arange(n))
-    assert relative_error(half._replace(vacated=0.0)) == pytest.approx(0.5, abs=0.06)  # x_d and x_v alone
+    assert relative_error(half._replace(vacated=0.0, windowed=0.0)) == pytest.approx(0.5, abs=0.06)  # x_d, x_v
     assert relative_error(half) >= 0.5 and fidelity(relative_error(half)) < 100.0
     assert fidelity(X_ZERO) == 0.0 and fidelity(X_FULL) == 100.0
 
@@ -229,6 +229,34 @@ def test_an_object_still_where_it_started_loses_at_the_place_it_left():
     frames, labels, robot, centres = _square_clip([10.0] * n, set())
     track = object_track(frames, labels, 1, robot, _pose(centres))
     assert track.vacated is None and appearance_error(np.zeros_like(frames), track, track.vacated, idx, 0.0) == 0.0
+
+
+def test_a_late_object_loses_in_the_window_where_it_lags():
+    """x_win on a square that slides 18 px over 1.5 s of a 3 s clip: a video whose square makes the same slide 0.25 s
+    or 0.5 s late matches the reference over most of the clip, so the error at the place it left pooled over the
+    whole clip (x_vac) stays below X_ZERO (the 0.25 s one's below X_FULL: full credit), while in the window of the
+    slide it lags by a large share of the motion and both windowed errors pass X_ZERO. A still square has 1 both ways, the reference
+    0. Drawn at blur level 0 (the synthetic clip's flat background gives the sharpness estimate nothing to read)."""
+    n = 60
+
+    def path(delay: int, share: float = 1.0) -> list[float]:
+        return [10.0 + share * 0.6 * min(max(t - 5 - delay, 0), 30) for t in range(n)]
+
+    frames, labels, robot, centres = _square_clip(path(0), set())
+    track = object_track(frames, labels, 1, robot, _pose(centres))
+    idx = np.arange(n)
+
+    def errors(video: np.ndarray) -> list[tuple[float, float]]:
+        terms = [appearance_terms(video, track, area, idx, 0.0) for area in (track.vacated, track.turn_area)]
+        return [(pooled(*t), windowed(*t)) for t in terms]
+
+    assert errors(frames) == [(0.0, 0.0), (0.0, 0.0)]
+    for delay in (5, 10):
+        (vac, vac_win), (_, own_win) = errors(_square_clip(path(delay), set())[0])
+        assert vac < X_ZERO < min(vac_win, own_win), (delay, vac, vac_win, own_win)
+        assert delay != 5 or vac < X_FULL
+    for pair in errors(_square_clip(path(0, 0.0), set())[0]):
+        assert pair == pytest.approx((1.0, 1.0), abs=1e-6)
 
 
 def _turning_clip(angles_deg: np.ndarray, covered: bool = False, size: int = 64):

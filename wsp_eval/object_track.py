@@ -34,10 +34,17 @@ frame nearest in time, spec §4.1):
      revealed), x_vac, the appearance error over those pixels: 0 where the video shows what the reference revealed,
      1 where it still shows the object there. It needs no match, so it holds where the object is hidden or only a
      sliver shows (a lifted object in the hand); it applies where the reference vacates at least `MIN_PIXELS` (per
-     128² px) in some frame. x is the larger of it and the above.
-   The appearance error over pixels P_t is √(Σ_t Σ_{P_t} ‖G − R‖² / Σ_t Σ_{P_t} ‖S − R‖²), G the generated frame,
-   R the reference's and S its frame 0 with frame t's robot on top (what an object that never moved would give),
-   all smoothed by `VACATED_SMOOTH` (the reference's at the video's sharpness).
+     128² px) in some frame;
+   - when: x_win, the same two appearance errors (the place it left, and the object's own pixels at frame 0 and at
+     t, in sight at both) taken over windows of `WINDOW` frames instead of the whole duration, the largest over the
+     windows in which the reference changes at least `WINDOW_SHARE` of what it changes in its most-changing window.
+     Pooled over a clip, a response that is late, jumps or goes a third as far differs from the reference only
+     in the second or so in which the reference moves, and the still frames around it dilute that; a window
+     holds it.
+   x is the largest of these. The appearance error over pixels P_t and frames T is
+   √(Σ_T Σ_{P_t} ‖G − R‖² / Σ_T Σ_{P_t} ‖S − R‖²), G the generated frame, R the reference's and S its frame 0 with
+   frame t's robot on top (what an object that never moved would give), all smoothed by `VACATED_SMOOTH` (the
+   reference's at the video's sharpness).
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -74,6 +81,8 @@ VACATED_CROP = 16.0  # px per 128 px: the appearance comparisons are smoothed on
 BLURS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0)  # px per 128: the sharpness levels a generated video is matched at
 SHARPNESS_MARGIN = 8.0  # px per 128: robot and object pixels grown by this are left out of the sharpness estimate
 X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise and a 1 px blur stay below it)
+WINDOW = 20  # frames (1 s at 20 Hz): the windowed appearance error's window
+WINDOW_SHARE = 0.5  # a window counts when the reference changes at least this share of the most-changing window's
 X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response of 30 % of the reference's is above)
 
 
@@ -263,14 +272,16 @@ def _areas(labels: np.ndarray, label: int, robot: np.ndarray, least: float) -> t
     return area(vacated, vacated), area((start | obj) & in_sight, changed)
 
 
-def appearance_error(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
-                     blur: float) -> float:
-    """√(Σ ‖G − R‖² / Σ ‖S − R‖²) over an area's pixels at every frame of the common duration (module docstring,
-    step 3): 0 where the generated video shows there what the reference does, 1 where it shows S, the reference's
-    frame 0 with that frame's robot on top; 0 for no area. `frame_idx[k]` is the generated frame shown at the time
-    of the reference's frame k; `blur` the video's sharpness level, at which the reference is drawn."""
+def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
+                     blur: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame k of the common duration, over an area's pixels: e_k = Σ ‖G − R‖² and o_k = Σ ‖S − R‖² (module
+    docstring, step 3), both zero where the area is empty (and everywhere for no area). `frame_idx[k]` is the
+    generated frame shown at the time of the reference's frame k; `blur` the video's sharpness level, at which the
+    reference is drawn."""
+    n = min(len(frame_idx), len(track.frames))
+    error, own = np.zeros(n), np.zeros(n)
     if area is None:
-        return 0.0
+        return error, own
     x0, y0, x1, y1 = area.box
     scale = track.size[0] / 128
 
@@ -279,16 +290,41 @@ def appearance_error(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
         return cv2.GaussianBlur(crop.astype(np.float32), (0, 0), sigma)
 
     crops = track.frames[:, y0:y1, x0:x1]
-    error = own = 0.0
-    for k in range(min(len(frame_idx), len(track.frames))):
+    for k in range(n):
         where = area.where[k]
         if not where.any():
             continue
         ref = drawn(crops[k], blur)
         still = np.where(area.robot[k][..., None], crops[k], crops[0])  # the object as at frame 0, the arm as at k
-        error += float(np.sum((drawn(frames[frame_idx[k], y0:y1, x0:x1], 0.0) - ref)[where] ** 2))
-        own += float(np.sum((drawn(still, blur) - ref)[where] ** 2))
-    return float(np.sqrt(error / own)) if own > 0 else 0.0
+        error[k] = float(np.sum((drawn(frames[frame_idx[k], y0:y1, x0:x1], 0.0) - ref)[where] ** 2))
+        own[k] = float(np.sum((drawn(still, blur) - ref)[where] ** 2))
+    return error, own
+
+
+def appearance_error(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
+                     blur: float) -> float:
+    """√(Σ_k e_k / Σ_k o_k) over every frame of the common duration (`appearance_terms`): 0 where the generated
+    video shows there what the reference does, 1 where it shows S, the reference's frame 0 with that frame's robot
+    on top; 0 for no area."""
+    return pooled(*appearance_terms(frames, track, area, frame_idx, blur))
+
+
+def pooled(error: np.ndarray, own: np.ndarray) -> float:
+    """√(Σ e / Σ o), 0 where the reference changes nothing there."""
+    total = float(own.sum())
+    return float(np.sqrt(error.sum() / total)) if total > 0 else 0.0
+
+
+def windowed(error: np.ndarray, own: np.ndarray) -> float:
+    """The largest √(Σ_W e / Σ_W o) over the windows of `WINDOW` consecutive frames (the whole duration where it is
+    shorter) whose Σ_W o is at least `WINDOW_SHARE` of the largest window's: where in time the video differs."""
+    if own.sum() <= 0:
+        return 0.0
+    w = min(WINDOW, len(own))
+    e = np.convolve(error, np.ones(w), "valid")
+    o = np.convolve(own, np.ones(w), "valid")
+    keep = o >= WINDOW_SHARE * o.max()
+    return float(np.sqrt((e[keep] / o[keep]).max()))
 
 
 def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int],
@@ -378,6 +414,7 @@ class Positions(NamedTuple):
     blur: float  # the video's blur level (px per 128) the templates were drawn at
     vacated: float  # x_vac: the error at the place the object left
     turned: float  # x_turn: the error on the object's own pixels, where it turns in place (`by_turn`); else 0
+    windowed: float  # x_win: the largest windowed error at the place it left and on its own pixels
     by_turn: bool  # whether the object turns in place (scored by its appearance) rather than travels
 
 
@@ -389,22 +426,23 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
         raise ValueError("the reference object is never in sight")
     by_turn = not track.moving and track.turning
     blur = sharpness(frames, track, frame_idx)
-    vacated = appearance_error(frames, track, track.vacated, frame_idx, blur)
+    left = appearance_terms(frames, track, track.vacated, frame_idx, blur)
+    own = appearance_terms(frames, track, track.turn_area, frame_idx, blur)
+    errors = dict(vacated=pooled(*left), turned=pooled(*own) if by_turn else 0.0,
+                  windowed=max(windowed(*left), windowed(*own)), by_turn=by_turn)
     if by_turn:  # scored on its own pixels: no position is read
         none = np.zeros((0, 2))
-        return Positions(none, none, [], track.size[0] / 128, blur, vacated,
-                         appearance_error(frames, track, track.turn_area, frame_idx, blur), True)
+        return Positions(none, none, [], track.size[0] / 128, blur, **errors)
     level = at_blur(track, blur)
     found = np.array([locate(smoothed(frames[frame_idx[k]]), level.templates[k], track.region) for k in used])
     offset = track.points[used] - np.array([level.templates[k].centre for k in used])  # to the projected position
-    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur, vacated,
-                     0.0, False)
+    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur, **errors)
 
 
 def relative_error(p: Positions) -> float:
-    """x (module docstring, step 3): the larger of x_vac and, for an object whose image travels, max(x_d, x_v), for
-    one that turns in place, x_turn."""
-    return max(_motion_error(p), p.vacated)
+    """x (module docstring, step 3): the largest of x_vac, x_win and, for an object whose image travels,
+    max(x_d, x_v), for one that turns in place, x_turn."""
+    return max(_motion_error(p), p.vacated, p.windowed)
 
 
 def _motion_error(p: Positions) -> float:

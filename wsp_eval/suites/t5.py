@@ -76,6 +76,7 @@ def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
     score = object_fidelity * min(1.0, arm / ARM_FULL)
     return score, {"object_fidelity": round(object_fidelity, 3), "object_error": round(x, 4), "object_blur": found.blur,
                    "object_vacated": round(found.vacated, 4), "object_turned": round(found.turned, 4),
+                   "object_windowed": round(found.windowed, 4),
                    "arm_rmfa": round(arm, 3), "recognised": recognised, **verdict}
 
 
