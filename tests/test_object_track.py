@@ -23,8 +23,8 @@ from wsp_eval import backends as registry
 from wsp_eval.backends import BackendSpec
 from wsp_eval.baselines import blur
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_error, appearance_terms, fidelity, object_track,
-                                   pooled, positions, relative_error, windowed)
+from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_terms, fidelity, object_track, pooled,
+                                   positions, relative_error, windowed)
 from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
 from wsp_eval.score import ScoreError, score_submission
 from wsp_eval.studies import t5_negatives
@@ -224,19 +224,21 @@ def test_an_object_still_where_it_started_loses_at_the_place_it_left():
         for t in range(n):
             keep = start & (robot[t] == 0)
             still[t][keep] = frames[0][keep]
-        assert appearance_error(frames, track, track.vacated, idx, 0.0) == 0.0
-        assert appearance_error(still, track, track.vacated, idx, 0.0) == pytest.approx(1.0, abs=0.1), hidden
+        assert pooled(*appearance_terms(frames, track, track.vacated, idx, 0.0)) == 0.0
+        assert pooled(*appearance_terms(still, track, track.vacated, idx, 0.0)) == pytest.approx(1.0, abs=0.1), hidden
     frames, labels, robot, centres = _square_clip([10.0] * n, set())
     track = object_track(frames, labels, 1, robot, _pose(centres))
-    assert track.vacated is None and appearance_error(np.zeros_like(frames), track, track.vacated, idx, 0.0) == 0.0
+    assert track.vacated is None and pooled(*appearance_terms(np.zeros_like(frames), track, track.vacated, idx,
+                                                                     0.0)) == 0.0
 
 
 def test_a_late_object_loses_in_the_window_where_it_lags():
     """x_win on a square that slides 18 px over 1.5 s of a 3 s clip: a video whose square makes the same slide 0.25 s
     or 0.5 s late matches the reference over most of the clip, so the error at the place it left pooled over the
     whole clip (x_vac) stays below X_ZERO (the 0.25 s one's below X_FULL: full credit), while in the window of the
-    slide it lags by a large share of the motion and both windowed errors pass X_ZERO. A still square has 1 both ways, the reference
-    0. Drawn at blur level 0 (the synthetic clip's flat background gives the sharpness estimate nothing to read)."""
+    slide it lags by a large share of the motion and both windowed errors pass X_ZERO. A still square has 1 both
+    ways, the reference 0. Drawn at blur level 0 (the synthetic clip's flat background gives the sharpness
+    estimate nothing to read)."""
     n = 60
 
     def path(delay: int, share: float = 1.0) -> list[float]:

@@ -301,14 +301,6 @@ def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
     return error, own
 
 
-def appearance_error(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
-                     blur: float) -> float:
-    """√(Σ_k e_k / Σ_k o_k) over every frame of the common duration (`appearance_terms`): 0 where the generated
-    video shows there what the reference does, 1 where it shows S, the reference's frame 0 with that frame's robot
-    on top; 0 for no area."""
-    return pooled(*appearance_terms(frames, track, area, frame_idx, blur))
-
-
 def pooled(error: np.ndarray, own: np.ndarray) -> float:
     """√(Σ e / Σ o), 0 where the reference changes nothing there."""
     total = float(own.sum())
