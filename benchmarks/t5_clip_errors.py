@@ -1,8 +1,9 @@
 """T5's object error per reference and stand-in, without the arm gate or the label judge: for every reference of a
 T5 config and every variant named (those of `wsp study t5-negatives`), the blur level T5 reads off the video
 (`object_track.sharpness`), the object's relative error x (`object_track.relative_error`; fidelity 100 at
-x ≤ 0.35, 0 at x ≥ 0.65) and, of it, the error at the place the object left (x_vac). The quick look behind the sharpness rule's design figures (spec §4.3), on
-training-range builds:
+x ≤ 0.35, 0 at x ≥ 0.65) and, of it, the error at the place the object left (x_vac) and the largest windowed
+appearance error (x_win). The quick look behind the sharpness rule's design figures (spec §4.3), on training-range
+builds:
 
     .venv/bin/python benchmarks/t5_clip_errors.py RELEASE t5_maniskill --variants oracle blur blur_1px noise frozen
 """
@@ -28,7 +29,7 @@ def main() -> None:
     ap.add_argument("--variants", nargs="+", default=["oracle", "blur", "blur_1px", "noise", "frozen"],
                     choices=tn.variant_names(), metavar="VARIANT")
     args = ap.parse_args()
-    print(f"| reference | primitive | kind | {' | '.join(f'{v} [blur] x (x_vac)' for v in args.variants)} |")
+    print(f"| reference | primitive | kind | {' | '.join(f'{v} [blur] x (x_vac, x_win)' for v in args.variants)} |")
     print(f"|---|---|---|{'---:|' * len(args.variants)}")
     for row in pq.read_table(args.release / args.config / INSTANCES).to_pylist():
         ref = InstanceReference(args.release / args.config, row)
@@ -42,7 +43,7 @@ def main() -> None:
         for name in args.variants:
             frames = tn.variant_frames(clip, name)
             found = ot.positions(frames, track, np.arange(len(frames)))
-            cells.append(f"[{found.blur:g}] {ot.relative_error(found):.2f} ({found.vacated:.2f})")
+            cells.append(f"[{found.blur:g}] {ot.relative_error(found):.2f} ({found.vacated:.2f}, {found.windowed:.2f})")
         kind = "travels" if track.moving else "turns"
         print(f"| {row['instance_id']} | {row['primitive']} | {kind} | {' | '.join(cells)} |", flush=True)
 
