@@ -261,6 +261,24 @@ def test_a_late_object_loses_in_the_window_where_it_lags():
         assert pair == pytest.approx((1.0, 1.0), abs=1e-6)
 
 
+def test_windows_count_where_the_reference_changes_and_a_short_clip_is_one_window():
+    """`windowed` on per-frame terms: the reference changes in frames 30–49 of 80 (o = 1 there) and a little
+    elsewhere (o = 0.01, under WINDOW_SHARE of the most-changing window); a video that differs only where the
+    reference hardly changes (e = 1 in frames 0–9) is not judged there; one that differs in frames 30–39 is judged
+    by the counted window where that weighs most: frames 20–39, where the reference changes 10.1 (half its
+    largest window's 20 and more). A clip shorter than WINDOW is one window: the pooled ratio."""
+    own = np.full(80, 0.01)
+    own[30:50] = 1.0
+    early, during = np.zeros(80), np.zeros(80)
+    early[:10] = 1.0
+    during[30:40] = 1.0
+    assert windowed(early, own) == 0.0
+    assert windowed(during, own) == pytest.approx(np.sqrt(10 / 10.1), rel=1e-9)
+    short_e, short_o = np.array([0.0, 1.0, 4.0]), np.array([1.0, 1.0, 2.0])
+    assert windowed(short_e, short_o) == pytest.approx(pooled(short_e, short_o)) == pytest.approx(np.sqrt(5 / 4))
+    assert windowed(np.ones(5), np.zeros(5)) == 0.0 == pooled(np.ones(5), np.zeros(5))
+
+
 def _turning_clip(angles_deg: np.ndarray, covered: bool = False, size: int = 64):
     """A textured 12×12 square turning in place about (32, 32) by `angles_deg[t]`; with `covered`, a robot block over
     it and a margin in every frame. Returns frames, object labels, robot labels and the pose."""

@@ -26,7 +26,7 @@ frame nearest in time, spec §4.1):
      x_v = RMS ‖(p̂_{t+L} − p̂_t) − (p*_{t+L} − p*_t)‖ / RMS ‖p*_{t+L} − p*_t‖ (a jump where the reference glides);
    - an object that turns in place (less travel, but an in-plane rotation of at least `ROT_VISIBLE`): x_turn, the
      appearance error below over the object's own pixels: at every frame t of the common duration, its pixels at
-     frame 0 and at frame t that are in sight at both (no robot at either). It needs no match or angle: a still
+     frame 0 or at frame t that are in sight at both (no robot at either). It needs no match or angle: a still
      object shows frame 0's image where the reference shows it turned (x_turn = 1), one that vanishes shows the
      table there (above 1), one that turns as the reference's shows what it shows (0);
    - the place it left, wherever the object is: at every frame of the common duration (seen or not), the pixels of
@@ -35,9 +35,10 @@ frame nearest in time, spec §4.1):
      1 where it still shows the object there. It needs no match, so it holds where the object is hidden or only a
      sliver shows (a lifted object in the hand); it applies where the reference vacates at least `MIN_PIXELS` (per
      128² px) in some frame;
-   - when: x_win, the same two appearance errors (the place it left, and the object's own pixels at frame 0 and at
-     t, in sight at both) taken over windows of `WINDOW` frames instead of the whole duration, the largest over the
-     windows in which the reference changes at least `WINDOW_SHARE` of what it changes in its most-changing window.
+   - when: x_win, the same two appearance errors (the place it left, and the object's own pixels at frame 0 or at
+     t, in sight at both; for a travelling object too) taken over windows of `WINDOW` frames instead of the whole
+     duration (one window where the clip is shorter), the largest over the windows in which the reference changes
+     at least `WINDOW_SHARE` of what it changes in its most-changing window.
      Pooled over a clip, a response that is late, jumps or goes a third as far differs from the reference only
      in the second or so in which the reference moves, and the still frames around it dilute that; a window
      holds it.
@@ -127,8 +128,9 @@ class ObjectTrack(NamedTuple):
     levels: dict  # blur level → its Level, filled on first use (`at_blur`)
     vacated: Area | None  # the object's frame-0 pixels the reference shows vacated at each frame; None where it
     #   vacates fewer than MIN_PIXELS (per 128² px) in every frame
-    turn_area: Area | None  # the object's pixels at frame 0 and at each frame, in sight in both; None where those
-    #   of one and not the other are fewer than MIN_PIXELS (per 128² px) in every frame
+    turn_area: Area | None  # the object's pixels at frame 0 or at each frame, in sight in both (x_turn's area, and
+    #   x_win's for every object); None where those of one and not the other are fewer than MIN_PIXELS (per 128² px)
+    #   in every frame
 
     @property
     def templates(self) -> list[Template | None]:
@@ -460,5 +462,5 @@ def _rms(v: np.ndarray) -> float:
 
 
 def fidelity(x: float) -> float:
-    """The fidelity of a relative position error x (module docstring, step 3)."""
+    """The fidelity of a relative error x (module docstring, step 3)."""
     return 100.0 * float(np.clip((X_ZERO - x) / (X_ZERO - X_FULL), 0.0, 1.0))

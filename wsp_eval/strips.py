@@ -35,9 +35,11 @@ def evidence(suite: str, seed: dict, row: dict) -> str:
                 f"{'tracked' if seed.get('tracked', True) else 'lost'} in {seed.get('visible_fraction', 0):.0%} of "
                 f"frames; presence {seed.get('presence', 1.0):.2f} (pass ≥ {KEEP})")
     if suite == "t5":
-        return (f"S {s:.0f}: object fidelity {seed.get('object_fidelity', 0):.0f} (relative position error "
-                f"{seed.get('object_error', 0):.2f}), arm RMFA {seed.get('arm_rmfa', 0):.0f}; label judge (reported "
-                f"beside): judged {seed.get('label') or 'unreadable'} (intended {row.get('primitive')})")
+        return (f"S {s:.0f}: object fidelity {seed.get('object_fidelity', 0):.0f} (relative error x "
+                f"{seed.get('object_error', 0):.2f}; at the place it left {seed.get('object_vacated', 0):.2f}, "
+                f"windowed {seed.get('object_windowed', 0):.2f}), arm RMFA {seed.get('arm_rmfa', 0):.0f}; "
+                f"label judge (reported beside): judged {seed.get('label') or 'unreadable'} "
+                f"(intended {row.get('primitive')})")
     if suite in ("t2", "t3"):
         windows = ", ".join("–" if w is None else f"{w:.0f}" for w in seed.get("windows") or [])
         return f"RMFA {s:.1f} over the first {seed.get('common_seconds', 0):.1f} s; per 2 s window: {windows or '–'}"
