@@ -20,11 +20,12 @@ import pyarrow.parquet as pq
 import pytest
 
 from wsp_eval import backends as registry
+from wsp_eval import composites as cp
 from wsp_eval.backends import BackendSpec
-from wsp_eval.baselines import blur
+from wsp_eval.baselines import NOISE_SIGMA, blur
 from wsp_eval.judge_data import visibly_different
-from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_terms, fidelity, object_track, pooled,
-                                   positions, relative_error, windowed)
+from wsp_eval.object_track import (X_FULL, X_ZERO, ObjectPose, appearance_errors, appearance_terms, arm_sharpness,
+                                   fidelity, object_track, pooled, positions, relative_error, sharpness, windowed)
 from wsp_eval.release_format import INSTANCES, MASK_COLUMN, MASKS, OBJECT_MASK_COLUMN, RELEASE_JSON
 from wsp_eval.score import ScoreError, score_submission
 from wsp_eval.studies import t5_negatives
@@ -125,11 +126,26 @@ def test_a_video_drawn_softer_reads_its_blur_and_keeps_its_object(releases, plat
             assert detail["object_fidelity"] == 100.0, (ref.row["instance_id"], ref.row["primitive"], detail)
 
 
+@pytest.mark.parametrize("platform", PLATFORMS)
+def test_an_arm_drawn_softer_is_read_on_the_references(releases, platform):
+    """The study's blurred arm (σ 1.5 px per 128 over the arm grown by 2σ) reads arm level 1.5 on every reference
+    (`arm_sharpness`, on the arm's band: the robot grown by 3 px per 128, less the objects), the reference itself
+    level 0; the scene's level stays 0 for both."""
+    for ref in _references(releases(platform), platform):
+        clip = t5_negatives.Clip(ref)
+        track = object_track(clip.frames, ref.object_masks("reference"), clip.label, ref.masks("reference"),
+                             ref.object_pose("reference", clip.label - 1))
+        idx = np.arange(clip.n)
+        soft = t5_negatives.variant_frames(clip, "arm_blur")
+        assert sharpness(soft, track, idx) == 0.0 and arm_sharpness(soft, track, idx, 0.0) == 1.5, ref.row
+        assert arm_sharpness(clip.frames, track, idx, 0.0) == 0.0
+
+
 def test_the_error_of_a_translated_object_is_exact():
     """A synthetic clip: a textured square moving 1 px a frame on a flat background; a generated video that moves
     it half as far has relative displacement error 0.5 (velocity error 0.5 too); one that moves it exactly, 0. The
-    half video also still covers part of the place the reference's square left, so its x (the larger of that
-    error and the appearance errors) is higher still."""
+    half video also still covers part of the place the reference's square left and changes its pixels otherwise
+    frame to frame, so its x (the larger of that error and the appearance errors) is higher still."""
     n, size = 24, 64
     rng = np.random.default_rng(0)
     patch = rng.integers(0, 255, (8, 8, 3), dtype=np.uint8)
@@ -150,7 +166,8 @@ def test_the_error_of_a_translated_object_is_exact():
     exact = relative_error(positions(ref, track, np.arange(n)))
     assert exact == 0.0  # the reference read exactly as the video is
     half = positions(video(0.5)[0], track, np.arange(n))
-    assert relative_error(half._replace(vacated=0.0, windowed=0.0)) == pytest.approx(0.5, abs=0.06)  # x_d, x_v
+    positional = half._replace(vacated=0.0, windowed=0.0, stepped=0.0)
+    assert relative_error(positional) == pytest.approx(0.5, abs=0.06)  # x_d, x_v
     assert relative_error(half) >= 0.5 and fidelity(relative_error(half)) < 100.0
     assert fidelity(X_ZERO) == 0.0 and fidelity(X_FULL) == 100.0
 
@@ -277,6 +294,53 @@ def test_windows_count_where_the_reference_changes_and_a_short_clip_is_one_windo
     short_e, short_o = np.array([0.0, 1.0, 4.0]), np.array([1.0, 1.0, 2.0])
     assert windowed(short_e, short_o) == pytest.approx(pooled(short_e, short_o)) == pytest.approx(np.sqrt(5 / 4))
     assert windowed(np.ones(5), np.zeros(5)) == 0.0 == pooled(np.ones(5), np.zeros(5))
+
+
+def test_a_jump_where_the_reference_glides_loses_frame_to_frame():
+    """x_step on a square that glides 12 px in four frames at 128²: a video whose square jumps there in one frame
+    (half way, as the study's teleport) is a frame or two from the reference's positions, so the position errors
+    and the windowed appearance errors stay below X_ZERO (partial credit), while its pixels change in one frame where
+    the reference's change over four: x_step is above X_ZERO. The reference has x_step 0, and the calibration
+    baseline's noise (σ 10 grey levels) stays below X_FULL: the noise floor takes out what noise changes alone."""
+    n = 40
+    glide = [10.0] * 15 + [10.0 + 3 * (t - 14) for t in range(15, 19)] + [22.0] * 21
+    jump = [10.0] * 17 + [22.0] * 23
+    frames, labels, robot, centres = _square_clip(glide, set(), size=128)
+    track = object_track(frames, labels, 1, robot, _pose(centres))
+    idx = np.arange(n)
+    assert positions(frames, track, idx).stepped == 0.0
+    jumped = positions(_square_clip(jump, set(), size=128)[0], track, idx)
+    assert relative_error(jumped._replace(stepped=0.0)) < X_ZERO < jumped.stepped
+    noisy = positions(cp.noisy(frames, NOISE_SIGMA, 0), track, idx)
+    assert noisy.stepped < X_FULL and relative_error(noisy) < X_FULL
+
+
+def test_an_arm_drawn_softer_than_the_scene_is_read_and_not_charged():
+    """A hand covering the left half of the gliding square: a video that blurs only the arm and what lies within
+    twice the blur of it (σ 1–2 px at 128², as learned models draw a moving arm) reads that level
+    (`arm_sharpness`), draws the reference's arm so, and keeps full credit; compared with the reference's sharp
+    arm, its own-pixel windowed error would pass X_FULL. One that smears the arm's own pixels alone, the square
+    sharp, would be charged on the square's pixels by the softened drawing and is judged with the sharp one. A
+    video as sharp as the reference reads level 0."""
+    n = 40
+    glide = [10.0] * 15 + [10.0 + 3 * (t - 14) for t in range(15, 19)] + [22.0] * 21
+    frames, labels, robot, centres = _square_clip(glide, set(), [4] * n, size=128)
+    track = object_track(frames, labels, 1, robot, _pose(centres))
+    idx = np.arange(n)
+    assert positions(frames, track, idx).arm == 0.0
+    for sigma in (1.0, 1.5, 2.0):
+        soft = cp.blurred_region(frames, robot > 0, sigma)
+        found = positions(soft, track, idx)
+        assert found.arm == sigma and relative_error(found) < X_FULL
+    sharp_arm = windowed(*appearance_terms(soft, track, track.turn_area, idx, 0.0))
+    assert sharp_arm > X_FULL
+    alone = frames.copy()  # the arm's own pixels smeared, the object beside it sharp
+    for t in range(n):
+        alone[t][robot[t] > 0] = cv2.GaussianBlur(frames[t], (0, 0), 2.0)[robot[t] > 0]
+    level = arm_sharpness(alone, track, idx, 0.0)
+    found = positions(alone, track, idx)
+    assert level > 0 and appearance_errors(alone, track, idx, 0.0, level, False)["windowed"] > X_ZERO
+    assert found.arm == 0.0 and relative_error(found) < X_ZERO
 
 
 def _turning_clip(angles_deg: np.ndarray, covered: bool = False, size: int = 64):

@@ -42,10 +42,21 @@ frame nearest in time, spec §4.1):
      Pooled over a clip, a response that is late, jumps or goes a third as far differs from the reference only
      in the second or so in which the reference moves, and the still frames around it dilute that; a window
      holds it.
+   - how: x_step, the object's frame-to-frame changes: over its pixels at frame k − 1 or k with the robot at
+     neither, the change the video shows from k − 1 to k against the reference's, Σ ‖ΔG − ΔR‖², less the video's
+     noise floor (what its changes differ by where the reference shows no motion), relative to the reference's own
+     change Σ ‖ΔR‖², both smoothed by `STEP_SMOOTH`, over the same windows as x_win. A jump changes the object's
+     pixels in one frame where the reference changes them over several, which positions a frame or two apart do
+     not show; an object that glides as the reference's has x_step 0.
    x is the largest of these. The appearance error over pixels P_t and frames T is
    √(Σ_T Σ_{P_t} ‖G − R‖² / Σ_T Σ_{P_t} ‖S − R‖²), G the generated frame, R the reference's and S its frame 0 with
    frame t's robot on top (what an object that never moved would give), all smoothed by `VACATED_SMOOTH` (the
-   reference's at the video's sharpness).
+   reference's at the video's sharpness). The appearance errors are taken twice, with the reference's arm drawn
+   sharp and drawn as the video draws it (`arm_sharpness`: the level of `BLURS` at which the reference best matches
+   the video on the arm's band, the robot's pixels grown by `ARM_BAND` less the objects'; the robot's pixels grown
+   by twice that blur are blurred by it), and the drawing with the smaller largest error counts: a model that
+   smears the moving arm over a grasped object is not charged for the smear, nor one that smears the arm alone
+   for a smear it did not draw. Both drawings are the reference's; the object must respond as it does in either.
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -68,6 +79,8 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
+from wsp_eval.composites import blurred_region
+
 MIN_PIXELS = 6  # visible object pixels (per 128² px) for a frame to carry a position
 SMOOTH = 3.0  # px per 128 px of frame height: both videos are Gaussian-smoothed by this before matching, so that a
 #   slightly blurred rendering matches the reference's sharp template
@@ -85,6 +98,10 @@ X_FULL = 0.35  # relative error at and below which the fidelity is 100 (noise an
 WINDOW = 20  # frames (1 s at 20 Hz): the windowed appearance error's window
 WINDOW_SHARE = 0.5  # a window counts when the reference changes at least this share of the most-changing window's
 X_ZERO = 0.65  # relative error at and above which the fidelity is 0 (a response of 30 % of the reference's is above)
+ARM_BAND = 3.0  # px per 128: the robot's pixels grown by this, less every object's, are where the arm's sharpness is
+#   read (the arm's edges, where a smear shows)
+STEP_SMOOTH = 2.0  # px per 128: both videos' frame-to-frame changes are compared after this smoothing, so that a
+#   sub-pixel difference in where an edge lies does not count as a change the reference does not make
 
 
 class Template(NamedTuple):
@@ -131,6 +148,11 @@ class ObjectTrack(NamedTuple):
     turn_area: Area | None  # the object's pixels at frame 0 or at each frame, in sight in both (x_turn's area, and
     #   x_win's for every object); None where those of one and not the other are fewer than MIN_PIXELS (per 128² px)
     #   in every frame
+    steps: Area | None  # the object's pixels at frame k − 1 or k, the robot at neither (x_step's area; empty at 0);
+    #   None where the object covers fewer than MIN_PIXELS (per 128² px) in every frame
+    robot: np.ndarray  # (T, H, W) bool: the robot's pixels
+    band: np.ndarray  # (T, H, W) bool: the pixels of the arm's sharpness estimate (ARM_BAND)
+    drawn: dict  # arm level → the reference frames with the arm drawn at that level (`arm_drawn`), made on first use
 
     @property
     def templates(self) -> list[Template | None]:
@@ -245,16 +267,23 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     scene = np.stack([cv2.dilate(((labels[i] > 0) | robot[i]).astype(np.uint8), kernel) == 0
                       for i in range(len(frames))])
     region = search_region(templates, frames.shape[1:3])
+    reach = int(np.ceil(ARM_BAND * h / 128))
+    ring = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * reach + 1, 2 * reach + 1))
+    band = np.stack([(cv2.dilate(robot[i].astype(np.uint8), ring) > 0) & (labels[i] == 0)
+                     for i in range(len(frames))])
     return ObjectTrack(frames.shape[1:3], region, points, true_turn, frames, scene,
-                       {0.0: _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least))
+                       {0.0: _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least), robot,
+                       band, {0.0: frames})
 
 
-def _areas(labels: np.ndarray, label: int, robot: np.ndarray, least: float) -> tuple[Area | None, Area | None]:
-    """The appearance comparisons' pixels (`ObjectTrack.vacated`, `ObjectTrack.turn_area`), cropped to the box of
-    the object's pixels over every frame grown by VACATED_CROP; either None where it covers too little."""
+def _areas(labels: np.ndarray, label: int, robot: np.ndarray,
+           least: float) -> tuple[Area | None, Area | None, Area | None]:
+    """The appearance comparisons' pixels (`ObjectTrack.vacated`, `ObjectTrack.turn_area`, `ObjectTrack.steps`),
+    cropped to the box of the object's pixels over every frame grown by VACATED_CROP; each None where it covers too
+    little."""
     obj = (labels == label) & ~robot
     if not obj[0].any():
-        return None, None
+        return None, None, None
     h, w = labels.shape[1:]
     grow = int(np.ceil(VACATED_CROP * h / 128))
     ys, xs = np.nonzero(obj.any(axis=0))
@@ -271,15 +300,17 @@ def _areas(labels: np.ndarray, label: int, robot: np.ndarray, least: float) -> t
     def area(where: np.ndarray, counted: np.ndarray) -> Area | None:
         return Area(where, box, robot[crop]) if counted.reshape(len(counted), -1).sum(axis=1).max() >= least else None
 
-    return area(vacated, vacated), area((start | obj) & in_sight, changed)
+    steps = np.zeros_like(obj)
+    steps[1:] = (obj[1:] | obj[:-1]) & free[1:] & free[:-1]
+    return area(vacated, vacated), area((start | obj) & in_sight, changed), area(steps, obj)
 
 
 def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, frame_idx: np.ndarray,
-                     blur: float) -> tuple[np.ndarray, np.ndarray]:
+                     blur: float, arm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Per frame k of the common duration, over an area's pixels: e_k = Σ ‖G − R‖² and o_k = Σ ‖S − R‖² (module
     docstring, step 3), both zero where the area is empty (and everywhere for no area). `frame_idx[k]` is the
     generated frame shown at the time of the reference's frame k; `blur` the video's sharpness level, at which the
-    reference is drawn."""
+    reference is drawn, and `arm` the arm's (`arm_sharpness`)."""
     n = min(len(frame_idx), len(track.frames))
     error, own = np.zeros(n), np.zeros(n)
     if area is None:
@@ -291,7 +322,7 @@ def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
         sigma = float(np.hypot(VACATED_SMOOTH, level)) * scale
         return cv2.GaussianBlur(crop.astype(np.float32), (0, 0), sigma)
 
-    crops = track.frames[:, y0:y1, x0:x1]
+    crops = arm_drawn(track, arm)[:, y0:y1, x0:x1]
     for k in range(n):
         where = area.where[k]
         if not where.any():
@@ -303,6 +334,47 @@ def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
     return error, own
 
 
+def step_terms(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float,
+               arm: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame k ≥ 1 of the common duration, over `ObjectTrack.steps`' pixels A_k: the change from frame k − 1
+    to k in the video against the reference's less the video's noise floor, e_k = Σ_A ‖ΔG − ΔR‖² − ν·|A_k| (below
+    zero where the video changes less than its noise there; `windowed` clips the windows' ratios at 0, not single
+    frames, so noise does not add up), and the reference's own change o_k = Σ_A ‖ΔR‖² (module docstring, step 3);
+    ν is the mean per-pixel ‖ΔG − ΔR‖² over the sharpness estimate's scene pixels (at every LAG-th pair), where
+    the reference shows no motion. Both smoothed by STEP_SMOOTH, the reference drawn at the video's sharpness and
+    at its arm's."""
+    n = min(len(frame_idx), len(track.frames))
+    error, own = np.zeros(n), np.zeros(n)
+    area = track.steps
+    if area is None or n < 2:
+        return error, own
+    scale = track.size[0] / 128
+    reference = arm_drawn(track, arm)
+
+    def smooth(frame: np.ndarray, level: float) -> np.ndarray:
+        return cv2.GaussianBlur(frame.astype(np.float32), (0, 0), float(np.hypot(STEP_SMOOTH, level)) * scale)
+
+    floor = []
+    for k in range(LAG, n, LAG):
+        scene = track.scene[k] & track.scene[k - 1]
+        if scene.any():
+            shown = smooth(frames[frame_idx[k]], 0.0) - smooth(frames[frame_idx[k - 1]], 0.0)
+            drawn = smooth(reference[k], blur) - smooth(reference[k - 1], blur)
+            floor.append(float(np.mean(np.sum((shown - drawn)[scene] ** 2, axis=-1))))
+    noise = float(np.mean(floor)) if floor else 0.0
+    x0, y0, x1, y1 = area.box
+    shown = [smooth(frames[frame_idx[k], y0:y1, x0:x1], 0.0) for k in range(n)]
+    drawn = [smooth(reference[k, y0:y1, x0:x1], blur) for k in range(n)]
+    for k in range(1, n):
+        where = area.where[k]
+        if not where.any():
+            continue
+        change = (drawn[k] - drawn[k - 1])[where]
+        own[k] = float(np.sum(change ** 2))
+        error[k] = float(np.sum(((shown[k] - shown[k - 1])[where] - change) ** 2)) - noise * where.sum()
+    return error, own
+
+
 def pooled(error: np.ndarray, own: np.ndarray) -> float:
     """√(Σ e / Σ o), 0 where the reference changes nothing there."""
     total = float(own.sum())
@@ -311,14 +383,15 @@ def pooled(error: np.ndarray, own: np.ndarray) -> float:
 
 def windowed(error: np.ndarray, own: np.ndarray) -> float:
     """The largest √(Σ_W e / Σ_W o) over the windows of `WINDOW` consecutive frames (the whole duration where it is
-    shorter) whose Σ_W o is at least `WINDOW_SHARE` of the largest window's: where in time the video differs."""
+    shorter) whose Σ_W o is at least `WINDOW_SHARE` of the largest window's: where in time the video differs (0
+    where every such Σ_W e is below 0, as x_step's can be)."""
     if own.sum() <= 0:
         return 0.0
     w = min(WINDOW, len(own))
     e = np.convolve(error, np.ones(w), "valid")
     o = np.convolve(own, np.ones(w), "valid")
     keep = o >= WINDOW_SHARE * o.max()
-    return float(np.sqrt((e[keep] / o[keep]).max()))
+    return float(np.sqrt(max(0.0, (e[keep] / o[keep]).max())))
 
 
 def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int],
@@ -355,6 +428,33 @@ def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
             drawn = cv2.GaussianBlur(ref, (0, 0), blur * scale) if blur > 0 else ref
             costs[i] += float(np.sum((drawn[scene] - shown) ** 2))
     return BLURS[int(np.argmin(costs))]
+
+
+def arm_sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float) -> float:
+    """The level of BLURS by which the video draws the arm softer than its scene (drawn at `blur`): where the
+    reference drawn at hypot(blur, level) best matches the video over the arm's band (`ObjectTrack.band`, at every
+    LAG-th frame of the common duration). Learned models often smear the moving arm while the rest stays sharp."""
+    scale = track.size[0] / 128
+    costs = np.zeros(len(BLURS))
+    for k in range(0, min(len(frame_idx), len(track.frames)), LAG):
+        band = track.band[k]
+        if not band.any():
+            continue
+        ref = track.frames[k].astype(np.float32)
+        shown = frames[frame_idx[k]].astype(np.float32)[band]
+        for i, level in enumerate(BLURS):
+            sigma = float(np.hypot(blur, level)) * scale
+            drawn = cv2.GaussianBlur(ref, (0, 0), sigma) if sigma > 0 else ref
+            costs[i] += float(np.sum((drawn[band] - shown) ** 2))
+    return BLURS[int(np.argmin(costs))]
+
+
+def arm_drawn(track: ObjectTrack, arm: float) -> np.ndarray:
+    """The reference frames with the robot's pixels, grown by twice the blur (where a smear of σ reaches), blurred
+    by `arm` px per 128 (the arm's sharpness level): the reference as the video draws its arm. Made on first use."""
+    if arm not in track.drawn:
+        track.drawn[arm] = blurred_region(track.frames, track.robot, arm * track.size[0] / 128)
+    return track.drawn[arm]
 
 
 def search_region(templates: list[Template | None], size: tuple[int, int]) -> tuple[int, int, int, int]:
@@ -406,9 +506,11 @@ class Positions(NamedTuple):
     frames: list[int]
     scale: float  # frame height / 128
     blur: float  # the video's blur level (px per 128) the templates were drawn at
+    arm: float  # the level the reference's arm was drawn at for the appearance errors: 0 or `arm_sharpness`'s
     vacated: float  # x_vac: the error at the place the object left
     turned: float  # x_turn: the error on the object's own pixels, where it turns in place (`by_turn`); else 0
     windowed: float  # x_win: the largest windowed error at the place it left and on its own pixels
+    stepped: float  # x_step: the windowed error of the object's frame-to-frame changes
     by_turn: bool  # whether the object turns in place (scored by its appearance) rather than travels
 
 
@@ -420,10 +522,9 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
         raise ValueError("the reference object is never in sight")
     by_turn = not track.moving and track.turning
     blur = sharpness(frames, track, frame_idx)
-    left = appearance_terms(frames, track, track.vacated, frame_idx, blur)
-    own = appearance_terms(frames, track, track.turn_area, frame_idx, blur)
-    errors = dict(vacated=pooled(*left), turned=pooled(*own) if by_turn else 0.0,
-                  windowed=max(windowed(*left), windowed(*own)), by_turn=by_turn)
+    drawings = [appearance_errors(frames, track, frame_idx, blur, arm, by_turn)
+                for arm in sorted({0.0, arm_sharpness(frames, track, frame_idx, blur)})]
+    errors = min(drawings, key=lambda e: max(e["vacated"], e["turned"], e["windowed"], e["stepped"]))
     if by_turn:  # scored on its own pixels: no position is read
         none = np.zeros((0, 2))
         return Positions(none, none, [], track.size[0] / 128, blur, **errors)
@@ -433,10 +534,21 @@ def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> 
     return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur, **errors)
 
 
+def appearance_errors(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float, arm: float,
+                      by_turn: bool) -> dict:
+    """x_vac, x_turn (where the object turns in place, else 0), x_win and x_step with the reference drawn at the
+    video's sharpness `blur` and its arm at `arm` (module docstring, step 3), as `Positions` fields."""
+    left = appearance_terms(frames, track, track.vacated, frame_idx, blur, arm)
+    own = appearance_terms(frames, track, track.turn_area, frame_idx, blur, arm)
+    return dict(arm=arm, vacated=pooled(*left), turned=pooled(*own) if by_turn else 0.0,
+                windowed=max(windowed(*left), windowed(*own)),
+                stepped=windowed(*step_terms(frames, track, frame_idx, blur, arm)), by_turn=by_turn)
+
+
 def relative_error(p: Positions) -> float:
-    """x (module docstring, step 3): the largest of x_vac, x_win and, for an object whose image travels,
+    """x (module docstring, step 3): the largest of x_vac, x_win, x_step and, for an object whose image travels,
     max(x_d, x_v), for one that turns in place, x_turn."""
-    return max(_motion_error(p), p.vacated, p.windowed)
+    return max(_motion_error(p), p.vacated, p.windowed, p.stepped)
 
 
 def _motion_error(p: Positions) -> float:

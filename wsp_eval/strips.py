@@ -37,7 +37,8 @@ def evidence(suite: str, seed: dict, row: dict) -> str:
     if suite == "t5":
         return (f"S {s:.0f}: object fidelity {seed.get('object_fidelity', 0):.0f} (relative error x "
                 f"{seed.get('object_error', 0):.2f}; at the place it left {seed.get('object_vacated', 0):.2f}, "
-                f"windowed {seed.get('object_windowed', 0):.2f}), arm RMFA {seed.get('arm_rmfa', 0):.0f}; "
+                f"windowed {seed.get('object_windowed', 0):.2f}, frame to frame {seed.get('object_stepped', 0):.2f}), "
+                f"arm RMFA {seed.get('arm_rmfa', 0):.0f}; "
                 f"label judge (reported beside): judged {seed.get('label') or 'unreadable'} "
                 f"(intended {row.get('primitive')})")
     if suite in ("t2", "t3"):

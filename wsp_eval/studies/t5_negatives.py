@@ -171,9 +171,9 @@ def score_clips(release: Path, config: str, backends, limit: int | None = None, 
             out.append({"config": config, "instance_id": row["instance_id"], "primitive": row["primitive"],
                         "variant": name, "score": round(float(score), 3),
                         "visible": visible[name],
-                        **{k: detail[k] for k in ("object_fidelity", "object_error", "object_blur", "object_vacated",
-                                                  "object_turned", "object_windowed", "arm_rmfa", "recognised",
-                                                  "label")}})
+                        **{k: detail[k] for k in ("object_fidelity", "object_error", "object_blur", "object_arm_blur",
+                                                  "object_vacated", "object_turned", "object_windowed",
+                                                  "object_stepped", "arm_rmfa", "recognised", "label")}})
         if progress:
             progress()
     return out

@@ -75,8 +75,9 @@ def score_seed(prepared: _Reference, videos, backends) -> tuple[float, dict]:
     recognised, verdict = _judge(frames, prepared.row, prepared.platform, backends.judge)
     score = object_fidelity * min(1.0, arm / ARM_FULL)
     return score, {"object_fidelity": round(object_fidelity, 3), "object_error": round(x, 4), "object_blur": found.blur,
-                   "object_vacated": round(found.vacated, 4), "object_turned": round(found.turned, 4),
-                   "object_windowed": round(found.windowed, 4),
+                   "object_arm_blur": found.arm, "object_vacated": round(found.vacated, 4),
+                   "object_turned": round(found.turned, 4), "object_windowed": round(found.windowed, 4),
+                   "object_stepped": round(found.stepped, 4),
                    "arm_rmfa": round(arm, 3), "recognised": recognised, **verdict}
 
 
