@@ -419,33 +419,31 @@ def at_blur(track: ObjectTrack, blur: float) -> Level:
 def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
     """The blur level of BLURS at which the reference's scene (its pixels away from the robot and the objects, at
     every LAG-th frame of the common duration) best matches the generated video: how sharply the video is drawn."""
-    scale = track.size[0] / 128
-    costs = np.zeros(len(BLURS))
-    for k in range(0, min(len(frame_idx), len(track.frames)), LAG):
-        ref, scene = track.frames[k].astype(np.float32), track.scene[k]
-        shown = frames[frame_idx[k]].astype(np.float32)[scene]
-        for i, blur in enumerate(BLURS):
-            drawn = cv2.GaussianBlur(ref, (0, 0), blur * scale) if blur > 0 else ref
-            costs[i] += float(np.sum((drawn[scene] - shown) ** 2))
-    return BLURS[int(np.argmin(costs))]
+    return _best_level(frames, track, frame_idx, track.scene, 0.0)
 
 
 def arm_sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float) -> float:
     """The level of BLURS by which the video draws the arm softer than its scene (drawn at `blur`): where the
     reference drawn at hypot(blur, level) best matches the video over the arm's band (`ObjectTrack.band`, at every
     LAG-th frame of the common duration). Learned models often smear the moving arm while the rest stays sharp."""
+    return _best_level(frames, track, frame_idx, track.band, blur)
+
+
+def _best_level(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, pixels: np.ndarray,
+                base: float) -> float:
+    """The level of BLURS at which the reference blurred by hypot(base, level) best matches the video (sum of
+    squared differences over `pixels` (T, H, W) bool, at every LAG-th frame of the common duration)."""
     scale = track.size[0] / 128
     costs = np.zeros(len(BLURS))
     for k in range(0, min(len(frame_idx), len(track.frames)), LAG):
-        band = track.band[k]
-        if not band.any():
+        ref, where = track.frames[k].astype(np.float32), pixels[k]
+        if not where.any():
             continue
-        ref = track.frames[k].astype(np.float32)
-        shown = frames[frame_idx[k]].astype(np.float32)[band]
+        shown = frames[frame_idx[k]].astype(np.float32)[where]
         for i, level in enumerate(BLURS):
-            sigma = float(np.hypot(blur, level)) * scale
+            sigma = float(np.hypot(base, level)) * scale
             drawn = cv2.GaussianBlur(ref, (0, 0), sigma) if sigma > 0 else ref
-            costs[i] += float(np.sum((drawn[band] - shown) ** 2))
+            costs[i] += float(np.sum((drawn[where] - shown) ** 2))
     return BLURS[int(np.argmin(costs))]
 
 
