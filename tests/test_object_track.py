@@ -331,7 +331,7 @@ def test_an_arm_drawn_softer_than_the_scene_is_read_and_not_charged():
     for sigma in (1.0, 1.5, 2.0):
         soft = cp.blurred_region(frames, robot > 0, sigma)
         found = positions(soft, track, idx)
-        assert found.arm == sigma and relative_error(found) < X_FULL
+        assert found.arm == sigma and relative_error(found) == 0.0  # the reference drawn as the video is
     sharp_arm = windowed(*appearance_terms(soft, track, track.turn_area, idx, 0.0))
     assert sharp_arm > X_FULL
     alone = frames.copy()  # the arm's own pixels smeared, the object beside it sharp
@@ -386,6 +386,31 @@ def test_an_object_turning_in_place_is_scored_on_its_own_pixels():
     assert relative_error(positions(gone, track, idx)) > 1.0
     hidden = _turning_clip(np.linspace(0, 40, n), covered=True)
     assert not object_track(hidden[0], hidden[1], 1, hidden[2], hidden[3]).scorable
+
+
+def test_a_still_object_beside_a_smeared_arm_is_charged_as_still():
+    """A 12 px square turning 40° in place at 128², fingers beside it from frame 4 on: a video that smears the arm
+    (σ 1–2 px, over what lies within 2σ of it, the square's edge included) and turns the square as the reference
+    does keeps full credit; one that smears the arm alike and leaves the square as at frame 0 has x_turn = 1 exactly,
+    as without the smear, because the still frame S is drawn with the same smear of frame t's arm as the
+    reference (a still frame whose arm is drawn sharp differs from the reference in the smear's halo too, and that
+    halo would count as the object's own change)."""
+    n = 30
+    frames, labels, robot, pose = _turning_clip(np.r_[np.zeros(8), np.linspace(0, 40, n - 8)], size=128)
+    frames[4:, 24:40, 39:45] = 40
+    robot[4:, 24:40, 39:45] = 1
+    track = object_track(frames, labels, 1, robot, pose)
+    assert track.turning and not track.moving
+    idx = np.arange(n)
+    still = frames.copy()  # the square as at frame 0, the fingers as the reference's
+    for t in range(n):
+        free = robot[t] == 0
+        still[t][free] = frames[0][free]
+    for sigma in (1.0, 1.5, 2.0):
+        turned = positions(cp.blurred_region(frames, robot > 0, sigma), track, idx)
+        frozen = positions(cp.blurred_region(still, robot > 0, sigma), track, idx)
+        assert turned.arm == frozen.arm == sigma and relative_error(turned) < X_FULL
+        assert frozen.turned == pytest.approx(1.0, abs=1e-6) and relative_error(frozen) >= 1.0 - 1e-6
 
 
 def test_an_older_release_format_is_refused_with_the_command_that_rebuilds_it(suites_release, tmp_path):

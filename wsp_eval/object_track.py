@@ -51,12 +51,15 @@ frame nearest in time, spec §4.1):
    x is the largest of these. The appearance error over pixels P_t and frames T is
    √(Σ_T Σ_{P_t} ‖G − R‖² / Σ_T Σ_{P_t} ‖S − R‖²), G the generated frame, R the reference's and S its frame 0 with
    frame t's robot on top (what an object that never moved would give), all smoothed by `VACATED_SMOOTH` (the
-   reference's at the video's sharpness). The appearance errors are taken twice, with the reference's arm drawn
-   sharp and drawn as the video draws it (`arm_sharpness`: the level of `BLURS` at which the reference best matches
-   the video on the arm's band, the robot's pixels grown by `ARM_BAND` less the objects'; the robot's pixels grown
-   by twice that blur are blurred by it), and the drawing with the smaller largest error counts: a model that
-   smears the moving arm over a grasped object is not charged for the smear, nor one that smears the arm alone
-   for a smear it did not draw. Both drawings are the reference's; the object must respond as it does in either.
+   reference's at the video's sharpness).
+   The arm's drawing: every error above is taken twice, with the reference's arm drawn sharp and drawn as the
+   video draws it (`arm_sharpness`: the level of `BLURS` at which the reference best matches the video on the
+   arm's band, the robot's pixels grown by `ARM_BAND` less the objects'; the robot's pixels grown by twice that
+   blur are blurred by it, in R, in S and in the frames the templates are drawn from), and the drawing with the
+   smaller x counts: a model that smears the moving arm over a grasped object is not charged for the smear, nor
+   one that smears the arm alone for a smear it did not draw. Both drawings are the reference's; the object must
+   respond as it does in either. S is drawn with the same smear of frame t's arm as R, so that the smear's halo
+   over the object is not counted as the object's own change.
    fidelity = 100·clip((X_ZERO − x) / (X_ZERO − X_FULL), 0, 1). A static video (the object where it started, as
    it was) has x = 1 and scores 0, as does one whose object vanishes or lags far behind; a video whose object moves
    where the reference's rests has errors where the reference has none.
@@ -124,12 +127,10 @@ class Level(NamedTuple):
 
 
 class Area(NamedTuple):
-    """Pixels an appearance comparison covers: `where` (T, h, w) bool inside `box` (x0, y0, x1, y1) of the frame,
-    and the robot's pixels there (T, h, w) bool."""
+    """Pixels an appearance comparison covers: `where` (T, h, w) bool inside `box` (x0, y0, x1, y1) of the frame."""
 
     where: np.ndarray
     box: tuple[int, int, int, int]
-    robot: np.ndarray
 
 
 class ObjectTrack(NamedTuple):
@@ -157,7 +158,7 @@ class ObjectTrack(NamedTuple):
     @property
     def templates(self) -> list[Template | None]:
         """A template per frame at the reference's sharpness (None where too little of the object is visible)."""
-        return self.levels[0.0].templates
+        return self.levels[0.0, 0.0].templates
 
     @property
     def used(self) -> list[int]:
@@ -272,7 +273,7 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
     band = np.stack([(cv2.dilate(robot[i].astype(np.uint8), ring) > 0) & (labels[i] == 0)
                      for i in range(len(frames))])
     return ObjectTrack(frames.shape[1:3], region, points, true_turn, frames, scene,
-                       {0.0: _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least), robot,
+                       {(0.0, 0.0): _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least), robot,
                        band, {0.0: frames})
 
 
@@ -298,7 +299,7 @@ def _areas(labels: np.ndarray, label: int, robot: np.ndarray,
     changed = (start ^ obj) & in_sight
 
     def area(where: np.ndarray, counted: np.ndarray) -> Area | None:
-        return Area(where, box, robot[crop]) if counted.reshape(len(counted), -1).sum(axis=1).max() >= least else None
+        return Area(where, box) if counted.reshape(len(counted), -1).sum(axis=1).max() >= least else None
 
     steps = np.zeros_like(obj)
     steps[1:] = (obj[1:] | obj[:-1]) & free[1:] & free[:-1]
@@ -328,7 +329,7 @@ def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
         if not where.any():
             continue
         ref = drawn(crops[k], blur)
-        still = np.where(area.robot[k][..., None], crops[k], crops[0])  # the object as at frame 0, the arm as at k
+        still = still_frame(track, k, arm)[y0:y1, x0:x1]
         error[k] = float(np.sum((drawn(frames[frame_idx[k], y0:y1, x0:x1], 0.0) - ref)[where] ** 2))
         own[k] = float(np.sum((drawn(still, blur) - ref)[where] ** 2))
     return error, own
@@ -395,12 +396,12 @@ def windowed(error: np.ndarray, own: np.ndarray) -> float:
 
 
 def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[int, int, int, int],
-           blur: float) -> Level:
+           blur: float, redraw: bool = False) -> Level:
     """`templates` (the reference's, at its own sharpness) redrawn from the frames blurred by `blur` (px per 128)
     before the matching's smoothing, and the reference read at that level."""
     sigma = float(np.hypot(SMOOTH, blur))
     drawn = {k: smoothed(frames[k], sigma) for k, t in enumerate(templates) if t is not None}
-    if blur > 0:
+    if blur > 0 or redraw:
         templates = [None if t is None else
                      t._replace(pixels=drawn[k][t.origin[1]:t.origin[1] + t.mask.shape[0],
                                                 t.origin[0]:t.origin[0] + t.mask.shape[1]])
@@ -409,11 +410,12 @@ def _level(frames: np.ndarray, templates: list[Template | None], region: tuple[i
     return Level(templates, read)
 
 
-def at_blur(track: ObjectTrack, blur: float) -> Level:
-    """The track's templates drawn at blur level `blur` (px per 128; one of BLURS), made on first use."""
-    if blur not in track.levels:
-        track.levels[blur] = _level(track.frames, track.templates, track.region, blur)
-    return track.levels[blur]
+def at_blur(track: ObjectTrack, blur: float, arm: float = 0.0) -> Level:
+    """The track's templates drawn at blur level `blur` (px per 128; one of BLURS) from the reference with its arm
+    drawn at `arm` (`arm_drawn`), made on first use."""
+    if (blur, arm) not in track.levels:
+        track.levels[blur, arm] = _level(arm_drawn(track, arm), track.templates, track.region, blur, arm > 0)
+    return track.levels[blur, arm]
 
 
 def sharpness(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> float:
@@ -445,6 +447,16 @@ def _best_level(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, p
             drawn = cv2.GaussianBlur(ref, (0, 0), sigma) if sigma > 0 else ref
             costs[i] += float(np.sum((drawn[where] - shown) ** 2))
     return BLURS[int(np.argmin(costs))]
+
+
+def still_frame(track: ObjectTrack, k: int, arm: float) -> np.ndarray:
+    """S_k: the reference's frame 0 with frame k's robot on top (an object that never moved), its arm drawn at `arm`
+    as the reference's is (`arm_drawn`), so that a smear reaching the object blends it with frame k's arm in S as
+    in the reference."""
+    still = np.where(track.robot[k][..., None], track.frames[k], track.frames[0])
+    if arm <= 0:
+        return still
+    return blurred_region(still[None], track.robot[k][None], arm * track.size[0] / 128)[0]
 
 
 def arm_drawn(track: ObjectTrack, arm: float) -> np.ndarray:
@@ -504,7 +516,7 @@ class Positions(NamedTuple):
     frames: list[int]
     scale: float  # frame height / 128
     blur: float  # the video's blur level (px per 128) the templates were drawn at
-    arm: float  # the level the reference's arm was drawn at for the appearance errors: 0 or `arm_sharpness`'s
+    arm: float  # the level the reference's arm is drawn at in the counted drawing: 0 or `arm_sharpness`'s
     vacated: float  # x_vac: the error at the place the object left
     turned: float  # x_turn: the error on the object's own pixels, where it turns in place (`by_turn`); else 0
     windowed: float  # x_win: the largest windowed error at the place it left and on its own pixels
@@ -514,22 +526,27 @@ class Positions(NamedTuple):
 
 def positions(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray) -> Positions:
     """Where a generated video shows the object, and its appearance errors; `frame_idx[k]` is its frame shown at the
-    time of the reference's frame k. The templates are drawn at the video's own sharpness (`sharpness`)."""
+    time of the reference's frame k. The templates are drawn at the video's own sharpness (`sharpness`), and the
+    reference's arm sharp and as the video draws it (`arm_sharpness`): the drawing with the smaller x counts."""
     used = [k for k in track.used if k < len(frame_idx)]
     if not used:
         raise ValueError("the reference object is never in sight")
     by_turn = not track.moving and track.turning
     blur = sharpness(frames, track, frame_idx)
-    drawings = [appearance_errors(frames, track, frame_idx, blur, arm, by_turn)
-                for arm in sorted({0.0, arm_sharpness(frames, track, frame_idx, blur)})]
-    errors = min(drawings, key=lambda e: max(e["vacated"], e["turned"], e["windowed"], e["stepped"]))
-    if by_turn:  # scored on its own pixels: no position is read
-        none = np.zeros((0, 2))
-        return Positions(none, none, [], track.size[0] / 128, blur, **errors)
-    level = at_blur(track, blur)
-    found = np.array([locate(smoothed(frames[frame_idx[k]]), level.templates[k], track.region) for k in used])
-    offset = track.points[used] - np.array([level.templates[k].centre for k in used])  # to the projected position
-    return Positions(found + offset, level.read[: len(used)] + offset, used, track.size[0] / 128, blur, **errors)
+    scale = track.size[0] / 128
+    shown = {} if by_turn else {k: smoothed(frames[frame_idx[k]]) for k in used}
+    offset = track.points[used] - np.array([track.templates[k].centre for k in used])  # to the projected position
+    drawings = []
+    for arm in sorted({0.0, arm_sharpness(frames, track, frame_idx, blur)}):
+        errors = appearance_errors(frames, track, frame_idx, blur, arm, by_turn)
+        if by_turn:  # scored on its own pixels: no position is read
+            none = np.zeros((0, 2))
+            drawings.append(Positions(none, none, [], scale, blur, **errors))
+            continue
+        level = at_blur(track, blur, arm)
+        found = np.array([locate(shown[k], level.templates[k], track.region) for k in used])
+        drawings.append(Positions(found + offset, level.read[: len(used)] + offset, used, scale, blur, **errors))
+    return min(drawings, key=relative_error)
 
 
 def appearance_errors(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, blur: float, arm: float,

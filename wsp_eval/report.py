@@ -25,7 +25,7 @@ TITLES = {"t1": "Local action calibration", "t2": "Global trajectory coverage",
           "t3": "Action-source behaviour preservation", "t4": "Interaction grounding",
           "t5": "Interaction dynamics"}
 DASH = "—"
-JUDGE_FALSE_ACCEPT = "48–67 %"  # of generated-video negatives, by platform (docs/validity.md, T5: `wsp study t5-negatives`)
+JUDGE_FALSE_ACCEPT = "49–63 %"  # of generated-video negatives, by platform (docs/validity.md, T5: `wsp study t5-negatives`)
 SVG_RC = {"svg.fonttype": "none"}  # text stays text: no font files, small, searchable
 SVG_METADATA = {"Date": None, "Creator": None, "Format": None, "Type": None}
 

@@ -59,7 +59,7 @@ from wsp_eval.suites import SCORERS
 from wsp_eval.suites.reference import InstanceReference
 
 REPORT_VERSION = 1
-SCORING_VERSION = 29  # what the scores mean, in the report and the resume cache's key (a cache of another version is
+SCORING_VERSION = 30  # what the scores mean, in the report and the resume cache's key (a cache of another version is
 #   discarded): bump it with every metric change and say in CHANGELOG.md what it does to scores
 ENCODING_ON = "lossless at the reference resolution only"  # the report's `encoding_check`
 ENCODING_OFF = "off (lossy or resampled videos scored)"
