@@ -154,6 +154,7 @@ class ObjectTrack(NamedTuple):
     robot: np.ndarray  # (T, H, W) bool: the robot's pixels
     band: np.ndarray  # (T, H, W) bool: the pixels of the arm's sharpness estimate (ARM_BAND)
     drawn: dict  # arm level → the reference frames with the arm drawn at that level (`arm_drawn`), made on first use
+    stills: dict  # arm level → the still frames S drawn at that level (`still_frames`), made on first use
 
     @property
     def templates(self) -> list[Template | None]:
@@ -274,7 +275,7 @@ def object_track(frames: np.ndarray, labels: np.ndarray, label: int, robot: np.n
                      for i in range(len(frames))])
     return ObjectTrack(frames.shape[1:3], region, points, true_turn, frames, scene,
                        {(0.0, 0.0): _level(frames, templates, region, 0.0)}, *_areas(labels, label, robot, least), robot,
-                       band, {0.0: frames})
+                       band, {0.0: frames}, {})
 
 
 def _areas(labels: np.ndarray, label: int, robot: np.ndarray,
@@ -329,7 +330,7 @@ def appearance_terms(frames: np.ndarray, track: ObjectTrack, area: Area | None, 
         if not where.any():
             continue
         ref = drawn(crops[k], blur)
-        still = still_frame(track, k, arm)[y0:y1, x0:x1]
+        still = still_frames(track, arm)[k, y0:y1, x0:x1]
         error[k] = float(np.sum((drawn(frames[frame_idx[k], y0:y1, x0:x1], 0.0) - ref)[where] ** 2))
         own[k] = float(np.sum((drawn(still, blur) - ref)[where] ** 2))
     return error, own
@@ -449,14 +450,14 @@ def _best_level(frames: np.ndarray, track: ObjectTrack, frame_idx: np.ndarray, p
     return BLURS[int(np.argmin(costs))]
 
 
-def still_frame(track: ObjectTrack, k: int, arm: float) -> np.ndarray:
-    """S_k: the reference's frame 0 with frame k's robot on top (an object that never moved), its arm drawn at `arm`
-    as the reference's is (`arm_drawn`), so that a smear reaching the object blends it with frame k's arm in S as
-    in the reference."""
-    still = np.where(track.robot[k][..., None], track.frames[k], track.frames[0])
-    if arm <= 0:
-        return still
-    return blurred_region(still[None], track.robot[k][None], arm * track.size[0] / 128)[0]
+def still_frames(track: ObjectTrack, arm: float) -> np.ndarray:
+    """S: per frame k, the reference's frame 0 with frame k's robot on top (an object that never moved), its arm
+    drawn at `arm` as the reference's is (`arm_drawn`), so that a smear reaching the object blends it with frame k's
+    arm in S as in the reference. Made on first use."""
+    if arm not in track.stills:
+        still = np.where(track.robot[..., None], track.frames, track.frames[:1])
+        track.stills[arm] = blurred_region(still, track.robot, arm * track.size[0] / 128) if arm > 0 else still
+    return track.stills[arm]
 
 
 def arm_drawn(track: ObjectTrack, arm: float) -> np.ndarray:
