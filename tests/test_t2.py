@@ -12,10 +12,10 @@ from conftest import T2_TASKS as TASKS
 from conftest import assert_source_episodes, build_tiny, instance_rows, open_lerobot, release_files
 
 from wsp_data.builders.t2 import (
-    BLOCK_STEPS, MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
+    MISMATCH_POINTS, TYPICAL_TRAJECTORIES, arm_blocked, motion_mismatch, object_flung, replay_problem,
     time_normalised,
 )
-from wsp_data.platforms import kit
+from wsp_data.platforms import BLOCK_STEPS, kit
 from wsp_data.schema import FPS, MAX_OBJECTS, OBJECT_POSES_KEY, SEED_BASE, VIDEO_KEY
 from wsp_eval.reference import object_poses, reference_masks
 

@@ -84,7 +84,7 @@ def test_every_stored_stream_replays_to_its_stored_states(rows, ds):
 
 def test_action_blind_plays_back_the_groups_expert(rows, suites_release):
     """T3's canonical execution: whatever the source, an action-blind model shows the expert of the group."""
-    from wsp_eval.baselines import source_episode_index
+    from wsp_eval.episode import source_episode_index
 
     expert = next(r for r in rows if r["source_group"] == "expert")["episode_indices"][0]
     assert {source_episode_index(CONFIG, r, suites_release / CONFIG) for r in rows} == {expert}

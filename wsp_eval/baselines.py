@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wsp_eval.episode import BaselineError, EpisodeContext, source_episode_index  # noqa: F401  (re-exported)
+from wsp_eval.episode import BaselineError, EpisodeContext
 from wsp_eval.generate import GenerateError, per_episode, write_submission
 from wsp_eval.registry import Registry
 

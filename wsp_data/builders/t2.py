@@ -19,7 +19,7 @@ import numpy as np
 from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
 from wsp_data.builders.source_survey import SourceSurvey
-from wsp_data.platforms import BLOCK_STEPS, PlatformKit, joint_blocked, kit  # noqa: F401  (BLOCK_STEPS: T2's rule, read by tests)
+from wsp_data.platforms import PlatformKit, joint_blocked, kit
 from wsp_data.platforms.contract import Dropped, rollout_problem
 from wsp_data.platforms.validity import MAX_JOINT_SPEED, check_rollout
 from wsp_data.schema import FPS, MAX_ATTEMPTS, SEED_BASE, SEED_SPAN, SOURCE_ROLE

@@ -14,8 +14,9 @@ import cv2
 import numpy as np
 import torch
 
-from wsp_eval.generate import GenerateError, Request
+from wsp_eval.generate import GenerateError
 from wsp_models.reference.network import NetConfig, ReferenceNet, condition
+from wsp_serve.callables import Request
 
 CHECKPOINTS = Path(__file__).parent / "checkpoints"
 CHUNK = 32  # frames per forward pass

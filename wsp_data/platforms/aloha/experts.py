@@ -18,9 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from wsp_data.platforms.aloha.env import (  # noqa: F401  (TASKS, AlohaTask re-exported: the kit imports them here)
-    HOME, OBJECTS, TASKS, TCP_X, AlohaPlatform, AlohaTask, aloha_task,
-)
+from wsp_data.platforms.aloha.env import HOME, OBJECTS, TCP_X, AlohaPlatform, aloha_task
 
 MAX_STEPS = 160  # 8 s at 20 Hz
 V = np.pi / 2  # pitch of a vertical (top-down) grasp

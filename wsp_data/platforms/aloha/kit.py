@@ -53,7 +53,7 @@ class AlohaKit(PlatformKit):
 
     # -- core ---------------------------------------------------------------------------------------------
     def tasks(self) -> dict:
-        from wsp_data.platforms.aloha.experts import TASKS
+        from wsp_data.platforms.aloha.env import TASKS
 
         return TASKS
 
