@@ -11,7 +11,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from wsp_eval.baselines import (BASELINES, LAG_SECONDS, BaselineError, EpisodeContext, paired_regions,
-                                fit_length, source_episode_index, write_baseline)
+                                fit_length, write_baseline)
+from wsp_eval.episode import source_episode_index
 from wsp_eval.reference import reference_frames
 from wsp_eval.submission import validate
 from wsp_eval.video import read_video

@@ -1,6 +1,7 @@
 """A real tiny T4 build (ManiSkill PickCube, 2 instances per kind): both loaders, and every kind's acceptance
 rule re-checked from the stored states with this file's own thresholds (spec §3.4, docs/suites/t4.md), not the
-builder's code. The reference must also score 100 when the stored video is tracked like a submission."""
+builder's code. On every platform's tiny T4 build the reference must also score 100 when its stored video is
+tracked like a submission, with the gate and displacement its row stores."""
 
 from __future__ import annotations
 
@@ -13,8 +14,8 @@ import pyarrow.parquet as pq
 import pytest
 from conftest import assert_source_episodes, instance_rows, open_lerobot
 
-from wsp_data.schema import CONTACTS_KEY, INSTANCES, OBJECT_POSES_KEY, VIDEO_KEY
-from wsp_eval.reference import object_poses, reference_masks
+from wsp_data.schema import CONTACTS_KEY, INSTANCES, OBJECT_POSES_KEY
+from wsp_eval.reference import object_poses, reference_frames, reference_masks
 
 KINDS = ("distractor", "false_contact", "spatial_proximity")
 STILL_M, STILL_RAD = 0.005, 0.05  # an object that stays put
@@ -147,19 +148,29 @@ def test_pixel_is_the_projection_of_the_stored_pose(rows, episodes):
         assert np.allclose(r["object_pixel_256"], 2 * (uv + 0.5) - 0.5, atol=1e-3)
 
 
-def test_stored_reference_scores_100_without_the_simulator(rows, ds):
-    """Tracking the decoded stored video (h264 crf 0) with the stored pixel, frame-0 mask and gate gives 100,
-    and the gate recomputed from the video matches the stored one."""
-    from wsp_eval.tracking import motion_gate, scoring_frames, t4_score
+T4_CONFIGS = {"suites_release": "t4_maniskill", "libero_release": "t4_libero", "aloha_release": "t4_aloha"}
 
-    for r in rows:
-        ep = ds.meta.episodes[r["episode_indices"][0]]
-        frames = [ds[i] for i in range(ep["dataset_from_index"], ep["dataset_to_index"])]
-        video = np.stack([(f[VIDEO_KEY].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) for f in frames])
-        mask0 = reference_masks(ds.root, r["episode_indices"][0])[0]
+
+@pytest.mark.parametrize("fixture", list(T4_CONFIGS))
+def test_the_row_holds_the_stored_videos_own_gate_and_the_oracle_scores_100(request, fixture):
+    """The gate and displacement a row stores are those of its video as the scorer decodes it (h264 crf 0, PyAV),
+    to the bit, and that video scores 100. The builder must measure the frames as stored: a rendered frame differs
+    from its stored one by a level here and there, and on some clips that moves the chained arm track of the gate
+    by 3× (docs/suites/t4.md)."""
+    from wsp_eval.tracking import motion_gate, scoring_video, t4_score
+
+    release = request.getfixturevalue(fixture)
+    config = T4_CONFIGS[fixture]
+    for r in instance_rows(release, config):
+        episode = r["episode_indices"][0]
+        video = reference_frames(release / config, episode)
+        mask0 = reference_masks(release / config, episode, first_only=True)[0]
         assert set(np.unique(mask0)) <= {0, 1, 2} and (mask0 == 2).any()
-        assert motion_gate(scoring_frames(video), mask0) == pytest.approx(r["gate_reference"], rel=0.1)
-        assert t4_score(video, np.array(r["object_pixel_256"]), mask0, r["gate_reference"]).score == 100.0
+        hands = np.array(r["hand_pixels_256"]) if r.get("hand_pixels_256") is not None else None
+        assert motion_gate(scoring_video(video), mask0, hands=hands) == r["gate_reference"]
+        score = t4_score(video, np.array(r["object_pixel_256"]), mask0, r["gate_reference"],
+                         r["object_visible_fraction"], hands=hands)
+        assert (score.score, score.displacement) == (100.0, r["displacement_reference"])
 
 
 def test_plan_balances_kinds_over_eligible_tasks():

@@ -1,12 +1,14 @@
 """A rollout's pictures as the release holds them: the video by LeRobot's own streaming encoder with the reference
 codec (near-lossless h264 yuv444p, crf 0) on one x264 thread, with LeRobot's per-channel statistics of its frames,
 and the robot and object label masks as PNG files. One x264 thread gives the same bytes in any process, so the
-worker that decides a slot encodes its rollouts and assembly only writes them."""
+worker that decides a slot encodes its rollouts and assembly only writes them. A builder that measures a quantity
+the scorer will compare (T4's motion gate) measures it on `stored_video`'s frames, the pictures the scorer reads."""
 
 from __future__ import annotations
 
 import io
 import tempfile
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +34,28 @@ def encode_video(rgb: np.ndarray, fps: int) -> tuple[bytes, dict[str, np.ndarray
         if stats is None or frames != len(rgb):
             raise RuntimeError(f"the video encoder wrote {frames} of {len(rgb)} frames")
         return path.read_bytes(), stats
+
+
+@dataclass(frozen=True)
+class StoredVideo:
+    """A rollout's video as the release stores it (`encode_video`) and its frames as the scorer decodes them."""
+
+    data: bytes = field(repr=False)
+    stats: dict[str, np.ndarray] = field(repr=False)
+    frames: np.ndarray = field(repr=False)  # (T, H, W, 3) uint8
+
+
+def stored_video(rgb: np.ndarray, fps: int) -> StoredVideo:
+    """`rgb` encoded as the release stores it and decoded back to RGB as `wsp_eval.reference` reads it (PyAV,
+    rgb24): near-lossless, yet a level off here and there, which is enough to move a chained tracker."""
+    import av
+
+    data, stats = encode_video(rgb, fps)
+    with av.open(io.BytesIO(data)) as container:
+        frames = np.stack([f.to_ndarray(format="rgb24") for f in container.decode(video=0)])
+    if frames.shape != rgb.shape:
+        raise RuntimeError(f"the stored video decodes to {frames.shape}, not the rendered {rgb.shape}")
+    return StoredVideo(data, stats, frames)
 
 
 def encode_pngs(labels: np.ndarray) -> list[bytes]:

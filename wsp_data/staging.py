@@ -23,7 +23,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from wsp_data.episode_codec import encode_pngs, encode_video, pack, unpack
+from wsp_data.episode_codec import StoredVideo, encode_pngs, encode_video, pack, unpack
 from wsp_data.platforms import Rollout
 
 T, R = TypeVar("T"), TypeVar("R")
@@ -51,18 +51,19 @@ class RolloutArrays:
     alt_actions: np.ndarray  # the other stream beside it (ManiSkill: end-effector; LIBERO: joint)
     intrinsic: np.ndarray
     extrinsic: np.ndarray
+    video: StoredVideo | None = None  # `rgb` already encoded (a builder that measured the stored frames)
 
     @classmethod
-    def from_rollout(cls, role: str, ro: Rollout) -> RolloutArrays:
+    def from_rollout(cls, role: str, ro: Rollout, video: StoredVideo | None = None) -> RolloutArrays:
         return cls(role, ro.seed, ro.stack("rgb"), ro.stack("mask"), ro.stack("objects"), ro.stack("qpos"), ro.stack("tcp_pose"),
                    ro.stack("object_poses"), ro.stack("contacts"), ro.stack("success"), ro.actions,
-                   ro.alt_actions, ro.intrinsic, ro.extrinsic)
+                   ro.alt_actions, ro.intrinsic, ro.extrinsic, video)
 
     def encode(self, fps: int) -> bytes:
         """The rollout as the npz file it is staged as (`StagedRollout`): the pictures encoded (most of staging's
         cost: a worker encodes, so a driver that only writes the bytes does not serialise the build)."""
         arrays = {k: v for k, v in vars(self).items() if isinstance(v, np.ndarray) and k not in PICTURES}
-        video, stats = encode_video(self.rgb, fps)
+        video, stats = (self.video.data, self.video.stats) if self.video is not None else encode_video(self.rgb, fps)
         masks, mask_ends = pack(encode_pngs(self.mask))
         objects, object_ends = pack(encode_pngs(self.objects))
         buffer = io.BytesIO()

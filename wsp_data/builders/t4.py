@@ -11,7 +11,8 @@
   Evaluated object: the target.
 Every proposal is validated unrendered first (common validity + the kind's rule over the whole rollout);
 only then is it rendered, checked again (the evaluated object must be what the camera sees at its projected
-centre in frame 0), and tracked with `wsp_eval.tracking`: the reference gate must reach
+centre in frame 0), encoded as the release stores it, and tracked with `wsp_eval.tracking` on the decoded frames,
+the pictures the scorer reads (`wsp_data.episode_codec.stored_video`): the reference gate must reach
 `GATE_MIN_REFERENCE`, the object must be trackable, and the reference must score 100. A false-contact instance
 must also be one T4 can fail: its source rollout (the expert carrying the target away along the same arm path,
 from the same first frame), scored as a submission, must score 0 wherever the simulator moved the target more
@@ -31,6 +32,7 @@ import numpy as np
 from wsp_data.builders.base import BuildConfig, Kept, SlotPlan, SuiteBuilder
 from wsp_data.builders.rig import RigCache
 from wsp_data.builders.source_survey import SourceSurvey
+from wsp_data.episode_codec import stored_video
 from wsp_data.platforms.contract import KINDS, Dropped, Proposal, T4Rig
 from wsp_data.platforms.interface import Rollout
 from wsp_data.schema import SOURCE_ROLE
@@ -164,8 +166,8 @@ class T4Builder(SourceSurvey, SuiteBuilder):
                         frame_size(ref.observations[0].rgb))
         if (hidden := centre_hidden(ref.observations[0].objects, k, pixel)) is not None:
             return Dropped("object_hidden_at_centre", rendered, simulated, hidden)
-        rgb, mask0 = ref.stack("rgb"), ref.observations[0].mask
-        hands = self.hand_pixels(ref)
+        stored, mask0 = stored_video(ref.stack("rgb"), self.kit.info.fps), ref.observations[0].mask
+        rgb, hands = stored.frames, self.hand_pixels(ref)
         video = scoring_video(rgb)
         gate = motion_gate(video, mask0, hands=hands)
         if gate < GATE_MIN_REFERENCE:
@@ -190,24 +192,26 @@ class T4Builder(SourceSurvey, SuiteBuilder):
             row["hand_pixels_256"] = hands.tolist()
         src = rig.replay(rig.render, seed, original)  # the unperturbed source rollout
         rendered += len(source)
-        if kind == "false_contact" and (carried := passes_when_carried(src, k, pixel, mask0, gate, motion, hands)):
+        src_stored = stored_video(src.stack("rgb"), self.kit.info.fps)
+        if kind == "false_contact" and (carried := passes_when_carried(src, src_stored.frames, k, pixel, mask0, gate,
+                                                                       motion, hands)):
             return Dropped("tracker_misses_carrying", rendered, simulated, carried)
-        return Kept(row, [RolloutArrays.from_rollout("reference", ref), RolloutArrays.from_rollout(SOURCE_ROLE, src)],
-                    rendered, simulated)
+        return Kept(row, [RolloutArrays.from_rollout("reference", ref, stored),
+                          RolloutArrays.from_rollout(SOURCE_ROLE, src, src_stored)], rendered, simulated)
 
 
-def passes_when_carried(src, k: int, pixel: np.ndarray, mask0: np.ndarray, gate: float, motion,
+def passes_when_carried(src, src_rgb: np.ndarray, k: int, pixel: np.ndarray, mask0: np.ndarray, gate: float, motion,
                         hands: np.ndarray | None) -> dict | None:
     """A false-contact reference's source rollout is the expert grasping the target and carrying it away, from the
     same first frame along the same arm path: exactly what a model that hallucinates contact would generate.
     Where the simulator moved the target more than MOTION_MAX px in the scoring frame, T4 must score that video 0;
     when it scores 100 instead (the tracker lost a small dark object under the fingers and kept following a still
     neighbour: LIBERO's chocolate pudding, docs/validity.md, T4 tracker), the instance cannot tell the two apart. Returns
-    the evidence of such a miss, else None."""
+    the evidence of such a miss, else None. `src_rgb`: the source's frames as stored."""
     size = frame_size(src.observations[0].rgb)
     truth = np.stack([project(o.object_poses[k, :3], src.intrinsic, src.extrinsic, size) for o in src.observations])
     moved = float(np.linalg.norm(truth - truth[0], axis=1).max())
     if moved <= MOTION_MAX:
         return None
-    score = t4_score(src.stack("rgb"), pixel, mask0, gate, motion.visible_fraction, hands=hands)
+    score = t4_score(src_rgb, pixel, mask0, gate, motion.visible_fraction, hands=hands)
     return None if score.score == 0 else {"true_d": moved, "d": score.displacement}
