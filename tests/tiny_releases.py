@@ -1,9 +1,9 @@
 """The test suite's shared tiny releases: each is built once per test run and shared by every test module and
 every pytest-xdist worker.
 
-`shared_release(name, root)` builds release `name` into `root/<name>/worldsimprobe` under a file lock, or
-returns it at once when another process has built it (a fixture asking for a release still being built waits
-for it). `scripts/test.sh` starts `python tests/tiny_releases.py ROOT` beside pytest, so the releases are built
+`shared_release(name, root)` builds release `name` into `root/<name>/worldsimprobe`, each config under a file lock
+of its own, or returns it at once when other processes have built it (a fixture asking for a config still being
+built waits for it). `scripts/test.sh` starts `python tests/tiny_releases.py ROOT` beside pytest, so the releases are built
 while the tests that need none run (both cores stay busy), and hands ROOT to the fixtures through
 `WSP_TEST_RELEASES`; a run without it (one test file, say) builds what it needs on first use, in the run's
 temp folder shared by its xdist workers.
@@ -20,6 +20,7 @@ import os
 import sys
 import tempfile
 import time
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
@@ -27,7 +28,7 @@ from filelock import FileLock
 
 from wsp_eval.release_format import DEFAULT_RELEASE_NAME  # the folder users load by name
 
-DONE = ".built"  # marker beside the release: present once every config is assembled
+DONE = ".built"  # marker beside the release: `.built.<config>` once that config is assembled
 
 TINY = dict(suite="t1", platform="maniskill", count=4, tasks=("PickCube", "PushCube"), seed=0, max_attempts=8)
 T2_TASKS = ("PickCube", "PushCube", "PullCube")
@@ -76,18 +77,26 @@ def build_config(out: Path, suite: str, platform: str, count: int, tasks: tuple[
     return out
 
 
-def shared_release(name: str, root: Path) -> Path:
-    """Release `name` under `root`, built by whichever process asks first; the others wait for it."""
-    if name not in RELEASES:
-        raise KeyError(f"no shared tiny release {name!r}; known: {', '.join(RELEASES)}")
+def shared_config(name: str, index: int, root: Path) -> Path:
+    """Config `index` of release `name` under `root`, built by whichever process asks first; the others wait for
+    it. Configs of one release build side by side (each has its lock; `wsp build` assembles one at a time)."""
+    suite, platform, count, tasks, extra = RELEASES[name][index]
     folder = root / name
     folder.mkdir(parents=True, exist_ok=True)
-    out = folder / DEFAULT_RELEASE_NAME
-    with FileLock(str(folder / ".lock")):
-        if not (folder / DONE).exists():
-            for suite, platform, count, tasks, extra in RELEASES[name]:
-                build_config(out, suite, platform, count, tasks, **extra)
-            (folder / DONE).touch()
+    out, tag = folder / DEFAULT_RELEASE_NAME, f"{suite}_{platform}"
+    with FileLock(str(folder / f".lock.{tag}")):
+        if not (folder / f"{DONE}.{tag}").exists():
+            build_config(out, suite, platform, count, tasks, **extra)
+            (folder / f"{DONE}.{tag}").touch()
+    return out
+
+
+def shared_release(name: str, root: Path) -> Path:
+    """Release `name` under `root` with every config of it built (`shared_config`)."""
+    if name not in RELEASES:
+        raise KeyError(f"no shared tiny release {name!r}; known: {', '.join(RELEASES)}")
+    for index in range(len(RELEASES[name])):
+        out = shared_config(name, index, root)
     return out
 
 
@@ -101,17 +110,26 @@ def offline_environment() -> None:
 PREBUILD_ORDER = ("libero", "t1", "suites", "aloha")  # the longest first; then in the order tests use them
 
 
-def _timed(name: str, root: Path) -> tuple[str, float]:
-    start = time.perf_counter()
-    shared_release(name, root)
-    return name, time.perf_counter() - start
+def prebuild_jobs(names: list[str]) -> list[tuple[str, int]]:
+    """Every config of `names` as one job, each release's configs in order, LIBERO's (the longest chain, which the
+    last tests wait for) taking turns with the others': a worker that finishes the short releases joins LIBERO's
+    chain instead of idling."""
+    libero = [(n, k) for n in names if n == "libero" for k in range(len(RELEASES[n]))]
+    others = [(n, k) for n in names if n != "libero" for k in range(len(RELEASES[n]))]
+    turns = [job for pair in zip(libero, others) for job in pair]
+    return turns + libero[len(turns) // 2:] + others[len(turns) // 2:]
+
+
+def _build(name: str, index: int, root: Path) -> str:
+    shared_config(name, index, root)
+    return name
 
 
 def main(argv: list[str] | None = None) -> int:
     offline_environment()
     p = argparse.ArgumentParser(description="Build the test suite's shared tiny releases into ROOT.")
     p.add_argument("root", type=Path)
-    p.add_argument("--workers", type=int, default=2, help="releases built at once (default 2)")
+    p.add_argument("--workers", type=int, default=2, help="configs built at once (default 2)")
     p.add_argument("names", nargs="*", default=list(PREBUILD_ORDER), help=f"default: {' '.join(PREBUILD_ORDER)}")
     args = p.parse_args(argv)
     unknown = set(args.names) - set(RELEASES)
@@ -119,10 +137,14 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"unknown release(s) {', '.join(sorted(unknown))}; known: {', '.join(RELEASES)}")
     start = time.perf_counter()
     print(f"[tiny releases] building {', '.join(args.names)} into {args.root}, {args.workers} at a time", flush=True)
+    jobs = prebuild_jobs(args.names)
+    left = Counter(name for name, _ in jobs)
     with ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as pool:
-        for job in as_completed([pool.submit(_timed, n, args.root) for n in args.names]):
-            name, seconds = job.result()
-            print(f"[tiny releases] {name}: {seconds:.0f} s", flush=True)
+        for job in as_completed([pool.submit(_build, n, k, args.root) for n, k in jobs]):
+            name = job.result()
+            left[name] -= 1
+            if not left[name]:
+                print(f"[tiny releases] {name}: done after {time.perf_counter() - start:.0f} s", flush=True)
     print(f"[tiny releases] done in {time.perf_counter() - start:.0f} s", flush=True)
     return 0
 
