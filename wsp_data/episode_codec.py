@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import tempfile
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -38,24 +39,28 @@ def encode_video(rgb: np.ndarray, fps: int) -> tuple[bytes, dict[str, np.ndarray
 
 @dataclass(frozen=True)
 class StoredVideo:
-    """A rollout's video as the release stores it (`encode_video`) and its frames as the scorer decodes them."""
+    """A rollout's video as the release stores it (`encode_video`); `frames` decodes it on first use as the scorer
+    reads a reference (PyAV, rgb24): near-lossless, yet a level off here and there, which is enough to move a
+    chained tracker."""
 
     data: bytes = field(repr=False)
     stats: dict[str, np.ndarray] = field(repr=False)
-    frames: np.ndarray = field(repr=False)  # (T, H, W, 3) uint8
+    shape: tuple[int, ...]  # of the rendered frames (T, H, W, 3)
+
+    @cached_property
+    def frames(self) -> np.ndarray:
+        import av
+
+        with av.open(io.BytesIO(self.data)) as container:
+            frames = np.stack([f.to_ndarray(format="rgb24") for f in container.decode(video=0)])
+        if frames.shape != self.shape:
+            raise RuntimeError(f"the stored video decodes to {frames.shape}, not the rendered {self.shape}")
+        return frames
 
 
 def stored_video(rgb: np.ndarray, fps: int) -> StoredVideo:
-    """`rgb` encoded as the release stores it and decoded back to RGB as `wsp_eval.reference` reads it (PyAV,
-    rgb24): near-lossless, yet a level off here and there, which is enough to move a chained tracker."""
-    import av
-
-    data, stats = encode_video(rgb, fps)
-    with av.open(io.BytesIO(data)) as container:
-        frames = np.stack([f.to_ndarray(format="rgb24") for f in container.decode(video=0)])
-    if frames.shape != rgb.shape:
-        raise RuntimeError(f"the stored video decodes to {frames.shape}, not the rendered {rgb.shape}")
-    return StoredVideo(data, stats, frames)
+    """`rgb` ((T, H, W, 3) uint8) encoded as the release stores it."""
+    return StoredVideo(*encode_video(rgb, fps), rgb.shape)
 
 
 def encode_pngs(labels: np.ndarray) -> list[bytes]:

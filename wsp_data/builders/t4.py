@@ -192,7 +192,7 @@ class T4Builder(SourceSurvey, SuiteBuilder):
             row["hand_pixels_256"] = hands.tolist()
         src = rig.replay(rig.render, seed, original)  # the unperturbed source rollout
         rendered += len(source)
-        src_stored = stored_video(src.stack("rgb"), self.kit.info.fps)
+        src_stored = stored_video(src.stack("rgb"), self.kit.info.fps)  # staged as is; decoded only if checked
         if kind == "false_contact" and (carried := passes_when_carried(src, src_stored.frames, k, pixel, mask0, gate,
                                                                        motion, hands)):
             return Dropped("tracker_misses_carrying", rendered, simulated, carried)
